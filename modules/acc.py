@@ -1,0 +1,168 @@
+"""ACC: success and failure maps with the early-warning go/no-go decision (thesis §3.3).
+
+The success map S_m learns the parameter vectors of successful trials, the
+failure map F_m those of failed trials. A candidate v is evaluated by its
+distance to the winner of each map (3.1)-(3.2); the early warning signal (3.3)
+vetoes it unless d_f - d_s > s_vig.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from pydantic import Field
+
+from sfl_brain.messages import (
+    Ack,
+    Evaluate,
+    Evaluation,
+    Exploit,
+    ExploitTable,
+    Finish,
+    Learn,
+    Learned,
+)
+from sfl_brain.module import Module, ModuleParams, on
+
+from .som import SelfOrganisingMap, SOMParams
+
+
+class ACCParams(SOMParams):
+    dim: int | None = Field(None, ge=1, le=8, description="dimension of the parameter space "
+                            "(default: the scenario's number of axes)")
+    restore: str | None = Field(None, description="a checkpoint (.npz) to start from")
+
+
+class ACC(Module):
+    """Success/failure self-organising maps and the early-warning decision (eqs. 3.1-3.3)."""
+
+    Params = ACCParams
+
+    def reset(self, seed: int) -> None:
+        p = self.params
+        dim = p.dim or len(p.shape)
+        success_rng, failure_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
+        self.success_map = SelfOrganisingMap(p, dim, success_rng)
+        self.failure_map = SelfOrganisingMap(p, dim, failure_rng)
+        if p.restore:
+            self.restore(p.restore)
+
+    # --- evaluation and decision -------------------------------------------------
+    def evaluate(self, candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """d_s and d_f for each row of ``candidates`` (3.1)-(3.2)."""
+        return self.success_map.nearest(candidates), self.failure_map.nearest(candidates)
+
+    @staticmethod
+    def early_warning(d_success: np.ndarray, d_failure: np.ndarray, s_vig: float) -> np.ndarray:
+        """EWS (3.3): True (no-go) unless d_f - d_s > s_vig."""
+        return ~((d_failure - d_success) > s_vig)
+
+    @on(Evaluate)
+    def on_evaluate(self, msg: Evaluate) -> Evaluation:
+        candidates = np.asarray(msg.candidates, dtype=float).reshape(-1, self.success_map.dim)
+        d_s, d_f = self.evaluate(candidates)
+        return Evaluation(d_success=d_s, d_failure=d_f, go=~self.early_warning(d_s, d_f, msg.s_vig))
+
+    # --- learning --------------------------------------------------------------------
+    def learn(self, v: np.ndarray, success: bool, rho: float = 1.0) -> float:
+        """A success teaches S_m with reward rho (5.1); a failure teaches F_m."""
+        if success:
+            return self.success_map.update(v, rho)
+        return self.failure_map.update(v, 1.0)
+
+    @on(Learn)
+    def on_learn(self, msg: Learn) -> Learned:
+        change = self.learn(np.asarray(msg.v, dtype=float), msg.success, msg.rho)
+        if self.recording is not None:
+            self.log_maps()
+        return Learned(
+            change=change,
+            n_success_samples=self.success_map.samples,
+            n_failure_samples=self.failure_map.samples,
+        )
+
+    # --- after learning ----------------------------------------------------------------
+    def prune_failure_map(self) -> np.ndarray:
+        """Switch off failure neurons that never won a failure sample and sit in the success zone.
+
+        "In the success zone": closer to the success map than to any failure neuron that did
+        represent failures (thesis §4.4.3, Fig. 4.13). Returns the indices removed.
+        """
+        fm = self.failure_map
+        used = fm.wins > 0
+        if not used.any():
+            return np.array([], dtype=int)
+        candidates = np.flatnonzero(~used & fm.active)
+        if candidates.size == 0:
+            return candidates
+        w = fm.weights[candidates]
+        d_success = self.success_map.nearest(w)
+        diff = w[:, None, :] - fm.weights[used][None, :, :]
+        d_failure = np.sqrt((diff**2).sum(-1)).min(axis=1)
+        removed = candidates[d_success < d_failure]
+        fm.active[removed] = False
+        return removed
+
+    def exploit(self, axis: int, conditions: np.ndarray) -> np.ndarray:
+        """For each condition, the success neuron whose weight on ``axis`` is closest (§3.5.2)."""
+        w = self.success_map.weights[self.success_map.active]
+        idx = np.argmin(np.abs(w[None, :, axis] - np.asarray(conditions)[:, None]), axis=1)
+        return w[idx]
+
+    @on(Exploit)
+    def on_exploit(self, msg: Exploit) -> ExploitTable:
+        conditions = np.asarray(msg.conditions, dtype=float)
+        return ExploitTable(conditions=conditions, weights=self.exploit(msg.axis, conditions))
+
+    def checkpoint(self, path: str | Path) -> None:
+        np.savez(
+            path,
+            **{f"{name}_{key}": getattr(m, key) for name, m in self._maps() for key in
+               ("weights", "wins", "active")},
+            success_samples=self.success_map.samples,
+            failure_samples=self.failure_map.samples,
+        )
+
+    def restore(self, path: str | Path) -> None:
+        with np.load(path) as data:
+            for name, m in self._maps():
+                if data[f"{name}_weights"].shape != m.weights.shape:
+                    raise ValueError(f"{path}: {name} map has shape {data[f'{name}_weights'].shape}, "
+                                     f"this ACC has {m.weights.shape}")
+                m.weights = data[f"{name}_weights"].copy()
+                m.wins = data[f"{name}_wins"].copy()
+                m.active = data[f"{name}_active"].copy()
+            self.success_map.samples = int(data["success_samples"])
+            self.failure_map.samples = int(data["failure_samples"])
+
+    @on(Finish)
+    def on_finish(self, msg: Finish) -> Ack:
+        removed = self.prune_failure_map() if msg.prune else np.array([], dtype=int)
+        if msg.path:
+            self.checkpoint(msg.path)
+        if self.recording is not None:
+            self.log_maps()
+        return Ack(detail=f"pruned {removed.size} failure neurons: {removed.tolist()}")
+
+    def _maps(self):
+        return (("success", self.success_map), ("failure", self.failure_map))
+
+    # --- observability ---------------------------------------------------------------------
+    def log_maps(self) -> None:
+        """Both maps' weights and grid edges, on the ``trial`` timeline."""
+        import rerun as rr
+
+        rec = self.recording
+        rec.set_time("trial", sequence=self.success_map.samples + self.failure_map.samples)
+        colours = {"success": (40, 170, 60), "failure": (210, 50, 50)}
+        for name, m in self._maps():
+            w = m.weights[:, :3]
+            points, strips = (rr.Points2D, rr.LineStrips2D) if w.shape[1] == 2 else (rr.Points3D, rr.LineStrips3D)
+            if w.shape[1] == 1:
+                w = np.column_stack([w, np.zeros(len(w))])
+                points, strips = rr.Points2D, rr.LineStrips2D
+            colour = np.where(m.active[:, None], colours[name], (150, 150, 150))
+            rec.log(f"{self.entity}/{name}_map/neurons", points(w, colors=colour, radii=0.008))
+            rec.log(f"{self.entity}/{name}_map/edges", strips([e[:, :3] for e in m.edges()],
+                                                              colors=colours[name], radii=0.002))

@@ -1,0 +1,103 @@
+"""Kohonen self-organising map, as the thesis uses it (eqs. 2.7-2.11 and 5.1).
+
+Weights live in the unit hypercube [0, 1]^dim. The learning rate and the
+neighbourhood radius decay with the number of samples *this map* has learnt
+(a success map and a failure map learn at different paces).
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from pydantic import Field
+
+from sfl_brain.module import ModuleParams
+
+
+class SOMParams(ModuleParams):
+    """Shape and schedule of a self-organising map."""
+
+    shape: tuple[int, ...] = Field((10, 10), min_length=1, max_length=4, description="neuron grid")
+    learning_rate: float = Field(0.4, gt=0, le=1, description="epsilon at the first sample (2.10)")
+    learning_rate_min: float = Field(0.02, ge=0, le=1, description="floor of epsilon")
+    radius: float | None = Field(None, gt=0, description="sigma at the first sample, grid units "
+                                 "(default: half the longest grid side)")
+    radius_min: float = Field(0.5, gt=0, description="floor of sigma, grid units")
+    decay: float = Field(100.0, gt=0, description="samples for epsilon and sigma to fall by 1/e")
+    neighbourhood: Literal["thesis", "gaussian"] = Field(
+        "thesis", description="'thesis': exp(-|r-s| / 2 sigma^2) as printed in (2.11); "
+        "'gaussian': exp(-|r-s|^2 / 2 sigma^2)")
+
+
+class SelfOrganisingMap:
+    """A map of ``prod(shape)`` neurons with weights in [0, 1]^dim."""
+
+    def __init__(self, params: SOMParams, dim: int, rng: np.random.Generator) -> None:
+        self.params = params
+        self.dim = dim
+        self.shape = tuple(params.shape)
+        self.size = int(np.prod(self.shape))
+        #: grid coordinates of each neuron, shape (size, len(shape))
+        self.grid = np.indices(self.shape).reshape(len(self.shape), -1).T.astype(float)
+        self.weights = rng.random((self.size, dim))
+        #: how many samples each neuron has won while learning
+        self.wins = np.zeros(self.size, dtype=np.int64)
+        #: neurons taking part in evaluation (pruning switches some off)
+        self.active = np.ones(self.size, dtype=bool)
+        self.samples = 0
+        self._radius0 = params.radius if params.radius is not None else max(self.shape) / 2.0
+        # grid distances between every pair of neurons, for the neighbourhood (2.11)
+        diff = self.grid[:, None, :] - self.grid[None, :, :]
+        self._grid_distance = np.sqrt((diff**2).sum(-1))
+        if params.neighbourhood == "gaussian":
+            self._grid_distance = self._grid_distance**2
+
+    # --- schedule ----------------------------------------------------------------
+    def learning_rate(self) -> float:
+        """epsilon(n) = max(eps_min, eps_0 exp(-n / decay)), n = samples learnt so far."""
+        p = self.params
+        return max(p.learning_rate_min, p.learning_rate * np.exp(-self.samples / p.decay))
+
+    def radius(self) -> float:
+        """sigma(n) = max(sigma_min, sigma_0 exp(-n / decay)), in grid units."""
+        p = self.params
+        return max(p.radius_min, self._radius0 * np.exp(-self.samples / p.decay))
+
+    # --- evaluation ----------------------------------------------------------------
+    def distances(self, vectors: np.ndarray) -> np.ndarray:
+        """|v - w_i| for every row v and active neuron i (3.1); shape (k, active)."""
+        diff = vectors[:, None, :] - self.weights[self.active][None, :, :]
+        return np.sqrt(np.einsum("kij,kij->ki", diff, diff))
+
+    def nearest(self, vectors: np.ndarray) -> np.ndarray:
+        """Distance from each row to its winner neuron (3.2)."""
+        return self.distances(vectors).min(axis=1)
+
+    def winner(self, v: np.ndarray) -> int:
+        """Index of the neuron whose weights are closest to v (2.7-2.8)."""
+        diff = self.weights - v
+        d = np.einsum("ij,ij->i", diff, diff)
+        d[~self.active] = np.inf
+        return int(np.argmin(d))
+
+    # --- learning ------------------------------------------------------------------
+    def update(self, v: np.ndarray, rho: float = 1.0) -> float:
+        """Learn v: w_i += eps h_ci rho (v - w_i)  (2.9-2.11, 5.1). Returns sum of squared changes."""
+        s = self.winner(v)
+        sigma = self.radius()
+        h = np.exp(-self._grid_distance[s] / (2.0 * sigma**2))  # (2.11)
+        delta = (self.learning_rate() * rho) * h[:, None] * (v - self.weights)  # (2.10), (5.1)
+        self.weights += delta  # (2.9)
+        self.wins[s] += 1
+        self.samples += 1
+        return float(np.einsum("ij,ij->", delta, delta))
+
+    def edges(self) -> list[np.ndarray]:
+        """Polylines joining grid neighbours, for drawing the map as a mesh."""
+        w = self.weights.reshape(*self.shape, self.dim)
+        lines = []
+        for axis in range(len(self.shape)):
+            moved = np.moveaxis(w, axis, -2).reshape(-1, self.shape[axis], self.dim)
+            lines.extend(moved)
+        return lines

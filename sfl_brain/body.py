@@ -1,0 +1,174 @@
+"""Bodies, low-level controllers and the lockstep trial loop that joins them.
+
+A :class:`Body` is a simulated robot: it starts a trial from a request, senses,
+takes one control tick of commands, and says when the trial is over and how it
+went. A :class:`Controller` turns one tick of sensor values into one tick of
+commands. :meth:`Body.trial` runs them in lockstep through a *link*: the
+controller itself in the same process (:class:`InProcessLink`), or the same
+controller in another process over Zenoh (``sfl_brain.host.BusLink``). The loop
+is the same either way, so both give identical trial records.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import ClassVar, Protocol
+
+import numpy as np
+from pydantic import Field
+
+from .messages import Ack, ControllerReset, MotorCommand, SensorFrame, TrialRequest, TrialResult
+from .module import Module, ModuleParams, on
+
+
+class ControllerLink(Protocol):
+    """How a body reaches its controller during a trial."""
+
+    def reset(self, msg: ControllerReset) -> None: ...
+
+    def step(self, frame: SensorFrame) -> MotorCommand: ...
+
+
+class InProcessLink:
+    """A controller hosted in the body's own process (composition, as ROS 2 components)."""
+
+    def __init__(self, controller: Controller) -> None:
+        self.controller = controller
+
+    def reset(self, msg: ControllerReset) -> None:
+        self.controller.handle(msg)
+
+    def step(self, frame: SensorFrame) -> MotorCommand:
+        return self.controller.handle(frame)
+
+
+class BodyParams(ModuleParams):
+    control_dt: float = Field(0.01, gt=0, le=0.1, description="control tick, s of simulated time")
+    duration: float = Field(10.0, gt=0, le=600, description="trial length, s of simulated time")
+
+
+class Body(Module):
+    """Base of simulated bodies. Subclasses fill the five trial hooks."""
+
+    Params: ClassVar[type[BodyParams]] = BodyParams
+    #: names of the sensor values of one tick, in order; empty for bodies that need no controller
+    SENSORS: ClassVar[tuple[str, ...]] = ()
+    #: names of the command values of one tick, in order
+    COMMANDS: ClassVar[tuple[str, ...]] = ()
+    #: parameters a trial request may set on the body (checked by ``sfl check``)
+    TRIAL_PARAMS: ClassVar[tuple[str, ...]] = ()
+
+    def __init__(self, params: BodyParams | None = None, *, seed: int = 0) -> None:
+        super().__init__(params, seed=seed)
+        self.link: ControllerLink | None = None
+        self.worker = "body"
+        #: pace the trial to wall-clock time (``sfl run --realtime``)
+        self.realtime = False
+
+    # --- the trial hooks ----------------------------------------------------
+    def start_trial(self, request: TrialRequest) -> None:
+        """Build the world for a trial from ``request.body_params`` and seed ``request.seed``."""
+        raise NotImplementedError
+
+    def sense(self) -> np.ndarray:
+        """Sensor values of the current tick, laid out as ``SENSORS``."""
+        raise NotImplementedError
+
+    def actuate(self, command: np.ndarray) -> None:
+        """Apply one tick of commands and advance the simulation by ``control_dt``."""
+        raise NotImplementedError
+
+    @property
+    def done(self) -> bool:
+        """True when the trial is over (time out, fall, goal)."""
+        raise NotImplementedError
+
+    def outcome(self) -> tuple[bool, float, dict]:
+        """(success, quality eta, metrics) of the finished trial."""
+        raise NotImplementedError
+
+    def log_trial(self, trial_id: int) -> None:
+        """Send what was buffered during the trial to ``self.recording`` (optional)."""
+
+    # --- the loop ------------------------------------------------------------
+    @on(TrialRequest)
+    def trial(self, request: TrialRequest) -> TrialResult:
+        """Run one trial in lockstep with the controller behind ``self.link``."""
+        self.logging = bool(request.log and self.recording is not None)
+        self.start_trial(request)
+        if self.COMMANDS:
+            if self.link is None:
+                raise RuntimeError(f"{type(self).__name__} needs a controller and has none")
+            self.link.reset(
+                ControllerReset(
+                    trial_id=request.trial_id,
+                    seed=request.seed,
+                    params=request.controller_params,
+                    sensors=list(self.SENSORS),
+                    commands=list(self.COMMANDS),
+                )
+            )
+            tick = 0
+            step_wall = time.perf_counter()
+            dt = self.params.control_dt
+            while not self.done:
+                frame = SensorFrame(trial_id=request.trial_id, tick=tick, values=self.sense())
+                command = self.link.step(frame)
+                if command.trial_id != request.trial_id or command.tick != tick:
+                    raise RuntimeError(
+                        f"controller answered trial {command.trial_id} tick {command.tick}, "
+                        f"expected trial {request.trial_id} tick {tick}"
+                    )
+                self.actuate(command.values)
+                tick += 1
+                if self.realtime:
+                    step_wall += dt
+                    delay = step_wall - time.perf_counter()
+                    if delay > 0:
+                        time.sleep(delay)
+        success, quality, metrics = self.outcome()
+        if self.logging:
+            self.log_trial(request.trial_id)
+        return TrialResult(
+            trial_id=request.trial_id,
+            success=bool(success),
+            quality=float(quality),
+            metrics=metrics,
+            worker=self.worker,
+        )
+
+
+class Controller(Module):
+    """Base of low-level controllers: one tick of sensors in, one tick of commands out."""
+
+    #: sensors this controller reads; the body must provide each of them
+    REQUIRED_SENSORS: ClassVar[tuple[str, ...]] = ()
+    #: commands this controller produces, in its own order
+    COMMANDS: ClassVar[tuple[str, ...]] = ()
+    #: learnt parameters a trial may set (checked by ``sfl check``)
+    TRIAL_PARAMS: ClassVar[tuple[str, ...]] = ()
+
+    def configure(self, params: dict, seed: int) -> None:
+        """Start of a trial: take the learnt parameters, reset the neurons."""
+        raise NotImplementedError
+
+    def step(self, sensors: np.ndarray) -> np.ndarray:
+        """One control tick: sensor values (``REQUIRED_SENSORS`` order) -> ``COMMANDS`` values."""
+        raise NotImplementedError
+
+    @on(ControllerReset)
+    def _reset_trial(self, msg: ControllerReset) -> Ack:
+        missing = [s for s in self.REQUIRED_SENSORS if s not in msg.sensors]
+        if missing:
+            raise ValueError(f"{type(self).__name__} needs sensors {missing}; body has {msg.sensors}")
+        if list(msg.commands) != list(self.COMMANDS):
+            raise ValueError(f"{type(self).__name__} commands {self.COMMANDS}; body expects {msg.commands}")
+        self._sensor_index = np.array([msg.sensors.index(s) for s in self.REQUIRED_SENSORS], dtype=int)
+        self._trial_id = msg.trial_id
+        self.configure(dict(msg.params), msg.seed)
+        return Ack()
+
+    @on(SensorFrame)
+    def _tick(self, frame: SensorFrame) -> MotorCommand:
+        values = self.step(frame.values[self._sensor_index])
+        return MotorCommand(trial_id=frame.trial_id, tick=frame.tick, values=values)

@@ -1,0 +1,151 @@
+"""The ``sfl`` command: run, check, list, inspect, worker, report."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import click
+
+from .scenario import ScenarioError, load
+
+EXIT_BAD_INPUT = 2
+
+
+def _load_or_exit(scenario: str, overrides: tuple[str, ...] = (), seed: int | None = None):
+    try:
+        return load(scenario, list(overrides), seed)
+    except ScenarioError as exc:
+        click.echo(f"sfl: invalid scenario\n{exc}", err=True)
+        sys.exit(EXIT_BAD_INPUT)
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+def main() -> None:
+    """sfl-brain: success-failure learning for robots, as processes over Zenoh, recorded in Rerun."""
+
+
+@main.command()
+@click.argument("scenario", type=click.Path(dir_okay=False))
+@click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE", help="override a scenario value")
+def check(scenario: str, overrides: tuple[str, ...]) -> None:
+    """Validate SCENARIO without starting anything (exit 2 on problems)."""
+    plan = _load_or_exit(scenario, overrides)
+    procs = ", ".join(i.name + (f" (+{i.colocated.name})" if i.colocated else "") for i in plan.instances)
+    click.echo(f"{scenario}: ok — protocol {plan.scenario.protocol.kind}, {plan.dim}-D space, processes: {procs}")
+
+
+@main.command("run")
+@click.argument("scenario", type=click.Path(dir_okay=False))
+@click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE", help="override a scenario value")
+@click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=None, help="override the scenario's seed")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None, help="run folder")
+@click.option("--viewer", is_flag=True, help="stream to a live Rerun viewer (spawned on 127.0.0.1)")
+@click.option("--viewer-url", default=None, help="stream to an already running viewer at this gRPC url")
+@click.option("--realtime", is_flag=True, help="pace the body to wall-clock time")
+@click.option("--listen", multiple=True, help="Zenoh endpoint to listen on (default: a free 127.0.0.1 port)")
+@click.option("--connect", multiple=True, help="Zenoh endpoint to connect to")
+@click.option("--quiet", is_flag=True, help="no progress bar")
+def run_command(scenario, overrides, seed, out, viewer, viewer_url, realtime, listen, connect, quiet) -> None:
+    """Run SCENARIO: one process per module, until the protocol completes."""
+    from .progress import ProgressView
+    from .run import run
+
+    plan = _load_or_exit(scenario, overrides, seed)
+    view = ProgressView(plan, enabled=not quiet)
+
+    def ready(sup, seconds):
+        view.ready(seconds)
+        if listen:
+            click.echo(f"sfl: run id {sup.run_id}; workers may join with: sfl worker {scenario} "
+                       f"--connect {listen[0]} --run-id {sup.run_id}")
+
+    with view:
+        run_dir, summary = run(plan, out, viewer=viewer_url or viewer, realtime=realtime, listen=list(listen) or None,
+                               connect=list(connect) or None, on_progress=view.update, on_ready=ready)
+    view.report(run_dir, summary)
+    if summary["status"] == "failed":
+        sys.exit(1)
+    if summary["status"] == "interrupted":
+        sys.exit(130)
+
+
+@main.command("list")
+def list_command() -> None:
+    """Show the registered module and body implementations."""
+    from .body import Body, Controller
+    from .registry import registered, resolve
+
+    rows = []
+    for name, reference in sorted(registered().items()):
+        try:
+            cls, _ = resolve(name)
+        except Exception as exc:  # a broken third-party entry point must not hide the others
+            rows.append((name, "?", f"cannot load {reference}: {exc}"))
+            continue
+        kind = "body" if issubclass(cls, Body) else "controller" if issubclass(cls, Controller) else "brain"
+        rows.append((name, kind, cls.describe()))
+    width = max(len(r[0]) for r in rows) if rows else 0
+    for name, kind, text in rows:
+        click.echo(f"{name:<{width}}  {kind:<10}  {text}")
+
+
+@main.command()
+@click.argument("run_dir", type=click.Path(file_okay=False, path_type=Path))
+@click.option("--json", "as_json", is_flag=True, help="print the summary as one JSON object")
+def inspect(run_dir: Path, as_json: bool) -> None:
+    """Summarise a finished or interrupted run."""
+    from .records import inspect_run
+
+    try:
+        summary = inspect_run(run_dir)
+    except FileNotFoundError as exc:
+        click.echo(f"sfl: {exc}", err=True)
+        sys.exit(EXIT_BAD_INPUT)
+    if as_json:
+        click.echo(json.dumps(summary))
+        return
+    for k, v in summary.items():
+        click.echo(f"{k:>16}: {v:.4g}" if isinstance(v, float) else f"{k:>16}: {v}")
+
+
+@main.command()
+@click.argument("scenario", type=click.Path(dir_okay=False))
+@click.option("--connect", required=True, multiple=True, help="the run's Zenoh endpoint")
+@click.option("--run-id", required=True, help="the run id printed by sfl run")
+@click.option("--name", default="ext0", help="worker suffix (unique per worker)")
+@click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE")
+def worker(scenario, connect, run_id, name, overrides) -> None:
+    """Serve trials for a running run: a body worker with its controller in this process."""
+    from .host import main as host_main
+    from .scenario import instance_seed
+
+    plan = _load_or_exit(scenario, overrides)
+    body = next(i for i in plan.instances if i.spec_name == plan.body_spec)
+    ctrl = body.colocated or next((i for i in plan.instances if i.name == body.routes.get("controller.sensors")), None)
+    spec = {
+        "run_id": run_id, "instance": f"{plan.body_spec}.{name}", "spec_name": plan.body_spec,
+        "reference": body.reference, "params": body.params, "seed": instance_seed(plan.scenario.seed, plan.body_spec),
+        "routes": {}, "listen": ["tcp/127.0.0.1:0"], "connect": list(connect), "rrd": None, "viewer": None,
+        "tick_timeout": plan.scenario.timeouts.trial, "watch_stdin": False,
+        "colocated": None if ctrl is None else {"reference": ctrl.reference, "params": ctrl.params,
+                                                 "seed": ctrl.seed, "spec_name": ctrl.spec_name},
+    }
+    click.echo(f"sfl: worker {spec['instance']} joining run {run_id} via {', '.join(connect)}")
+    sys.exit(host_main([json.dumps(spec)]))
+
+
+@main.command()
+@click.argument("run_dirs", nargs=-1, required=True, type=click.Path(file_okay=False, path_type=Path))
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("docs/results"))
+def report(run_dirs, out) -> None:
+    """Write the figures (PNG) and a Markdown table of RUN_DIRS to OUT."""
+    from .report import write_report
+
+    path = write_report(list(run_dirs), out)
+    click.echo(f"sfl: report written to {path}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,326 @@
+"""Typed messages and the one codec that moves them over the bus.
+
+Every message is a frozen, keyword-only dataclass registered under a short tag
+(``acc.evaluate``). On the wire a message is a msgpack array
+``[SCHEMA_VERSION, tag, [field values...]]``; numpy arrays travel as a msgpack
+extension (dtype, shape, raw bytes), so a frame of sensor values costs one copy.
+
+``decode`` raises :class:`MessageError` for anything it cannot turn back into a
+registered message of the right schema version and field types; the runtime logs
+and drops such input, it never crashes on it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import types
+import typing
+from typing import Any, ClassVar
+
+import msgpack
+import numpy as np
+
+SCHEMA_VERSION = 1
+_NDARRAY_EXT = 1
+
+_REGISTRY: dict[str, type[Message]] = {}
+
+
+class MessageError(ValueError):
+    """A payload that is not a well-formed message of this schema."""
+
+
+class Message:
+    """Base of all messages. Subclasses are made with :func:`message`."""
+
+    TAG: ClassVar[str] = ""
+    #: True for lockstep streams (pub/sub, reply published back); False for request/reply.
+    STREAM: ClassVar[bool] = False
+    _FIELDS: ClassVar[tuple[str, ...]] = ()
+    _CHECKS: ClassVar[tuple[tuple[str, Any], ...]] = ()
+
+
+def _checker(annotation: Any):
+    """A cheap isinstance check for a field annotation, or None for no check."""
+    origin = typing.get_origin(annotation)
+    if annotation is float:
+        return (int, float)
+    if annotation is int:
+        return int
+    if annotation is bool:
+        return bool
+    if annotation is str:
+        return str
+    if annotation is np.ndarray:
+        return np.ndarray
+    if origin in (dict,):
+        return dict
+    if origin in (list, tuple):
+        return (list, tuple)
+    if origin in (types.UnionType, typing.Union):
+        parts = [_checker(a) for a in typing.get_args(annotation)]
+        if any(p is None for p in parts):
+            return None
+        flat: list[type] = []
+        for p in parts:
+            flat.extend(p if isinstance(p, tuple) else (p,))
+        return tuple(flat)
+    if annotation is type(None):
+        return type(None)
+    return None
+
+
+def message(tag: str, *, stream: bool = False):
+    """Class decorator: make a frozen keyword-only dataclass and register it under ``tag``."""
+
+    def wrap(cls):
+        if tag in _REGISTRY:
+            raise ValueError(f"message tag {tag!r} registered twice")
+        cls = dataclasses.dataclass(frozen=True, kw_only=True, slots=True)(cls)
+        hints = typing.get_type_hints(cls)
+        names = tuple(f.name for f in dataclasses.fields(cls))
+        cls.TAG = tag
+        cls.STREAM = stream
+        cls._FIELDS = names
+        cls._CHECKS = tuple((n, c) for n in names if (c := _checker(hints[n])) is not None)
+        _REGISTRY[tag] = cls
+        return cls
+
+    return wrap
+
+
+def registered() -> dict[str, type[Message]]:
+    """All registered message types by tag (a copy)."""
+    return dict(_REGISTRY)
+
+
+def _default(obj: Any) -> Any:
+    if isinstance(obj, np.ndarray):
+        arr = np.ascontiguousarray(obj)
+        return msgpack.ExtType(
+            _NDARRAY_EXT, msgpack.packb([arr.dtype.str, list(arr.shape), arr.tobytes()])
+        )
+    if isinstance(obj, np.generic):
+        return obj.item()
+    raise TypeError(f"cannot encode {type(obj).__name__}")
+
+
+def _ext_hook(code: int, data: bytes) -> Any:
+    if code != _NDARRAY_EXT:
+        raise MessageError(f"unknown extension type {code}")
+    dtype, shape, raw = msgpack.unpackb(data)
+    return np.frombuffer(raw, dtype=np.dtype(dtype)).reshape(shape)
+
+
+def encode(msg: Message) -> bytes:
+    """Serialise a registered message to bytes."""
+    return msgpack.packb(
+        [SCHEMA_VERSION, msg.TAG, [getattr(msg, name) for name in msg._FIELDS]], default=_default
+    )
+
+
+def decode(data: bytes) -> Message:
+    """Turn bytes back into a message, or raise :class:`MessageError` saying why not."""
+    try:
+        obj = msgpack.unpackb(data, ext_hook=_ext_hook, strict_map_key=False)
+    except MessageError:
+        raise
+    except Exception as exc:  # msgpack raises several unrelated types on garbage
+        raise MessageError(f"not msgpack: {exc}") from None
+    if not (isinstance(obj, list) and len(obj) == 3):
+        raise MessageError("expected [schema_version, tag, fields]")
+    version, tag, values = obj
+    if version != SCHEMA_VERSION:
+        raise MessageError(f"schema version {version!r}, this side speaks {SCHEMA_VERSION}")
+    cls = _REGISTRY.get(tag) if isinstance(tag, str) else None
+    if cls is None:
+        raise MessageError(f"unknown message tag {tag!r}")
+    if not isinstance(values, list) or len(values) != len(cls._FIELDS):
+        raise MessageError(f"{tag}: expected {len(cls._FIELDS)} fields {cls._FIELDS}")
+    kwargs = dict(zip(cls._FIELDS, values, strict=True))
+    for name, check in cls._CHECKS:
+        value = kwargs[name]
+        if isinstance(value, bool) and check in (int, (int, float)):
+            raise MessageError(f"{tag}.{name}: expected a number, got a bool")
+        if not isinstance(value, check):
+            raise MessageError(f"{tag}.{name}: expected {check}, got {type(value).__name__}")
+    return cls(**kwargs)
+
+
+# ---------------------------------------------------------------------------
+# The messages of the framework. Brain modules and bodies speak these.
+# ---------------------------------------------------------------------------
+
+
+@message("ack")
+class Ack(Message):
+    """Generic acknowledgement (reply to commands that return nothing)."""
+
+    detail: str = ""
+
+
+# --- ACC: success and failure maps (thesis §3.3) ---------------------------
+
+
+@message("acc.evaluate")
+class Evaluate(Message):
+    """Evaluate candidate vectors (rows, unit coordinates) against both maps at threshold s_vig."""
+
+    candidates: np.ndarray
+    s_vig: float
+
+
+@message("acc.evaluation")
+class Evaluation(Message):
+    """d_s, d_f (3.1)-(3.2) and the go decision (EWS = 0, eq. 3.3) for each candidate."""
+
+    d_success: np.ndarray
+    d_failure: np.ndarray
+    go: np.ndarray
+
+
+@message("acc.learn")
+class Learn(Message):
+    """Learn one trial: success -> success map with reward rho (5.1); failure -> failure map."""
+
+    v: np.ndarray
+    success: bool
+    rho: float
+
+
+@message("acc.learned")
+class Learned(Message):
+    """Sum of squared weight changes of the map that learnt (convergence) and sample counts."""
+
+    change: float
+    n_success_samples: int
+    n_failure_samples: int
+
+
+@message("acc.exploit")
+class Exploit(Message):
+    """For each condition value on ``axis``, the success neuron whose weight there is closest."""
+
+    axis: int
+    conditions: np.ndarray
+
+
+@message("acc.exploit_table")
+class ExploitTable(Message):
+    conditions: np.ndarray
+    weights: np.ndarray
+
+
+@message("acc.finish")
+class Finish(Message):
+    """End of learning: prune orphan failure neurons and checkpoint the maps to ``path``."""
+
+    path: str
+    prune: bool
+
+
+# --- Vigilance (§3.3.4, (4.14), §5.6.3) ------------------------------------
+
+
+@message("vigilance.start")
+class VigilanceStart(Message):
+    """Ask the threshold for the first trial."""
+
+
+@message("vigilance.trial_done")
+class TrialDone(Message):
+    """A trial finished; ``trial_index`` is the number of trials done so far."""
+
+    trial_index: int
+    success: bool
+    n_success: int
+    n_failure: int
+
+
+@message("vigilance.rejected")
+class Rejected(Message):
+    """``consecutive`` no-go decisions in a row."""
+
+    consecutive: int
+
+
+@message("vigilance.threshold")
+class Threshold(Message):
+    """The threshold s_vig in force and the band it was drawn from (low == high when fixed)."""
+
+    s_vig: float
+    low: float
+    high: float
+
+
+# --- OFC: qualitative adaptive reward (§5.4.2) -----------------------------
+
+
+@message("ofc.grade")
+class Grade(Message):
+    """Grade a successful trial of quality eta (5.8)."""
+
+    eta: float
+
+
+@message("ofc.reward")
+class Reward(Message):
+    """The reward factor rho (5.2) and the running quality range (5.3)."""
+
+    rho: float
+    eta_min: float
+    eta_max: float
+
+
+# --- Bodies and controllers -------------------------------------------------
+
+
+@message("body.trial")
+class TrialRequest(Message):
+    """Run one trial. ``body_params`` / ``controller_params`` are physical values by name."""
+
+    trial_id: int
+    seed: int
+    body_params: dict
+    controller_params: dict
+    log: bool
+
+
+@message("body.result")
+class TrialResult(Message):
+    """Outcome of a trial: success, quality eta, and body metrics (distance, velocity, ...)."""
+
+    trial_id: int
+    success: bool
+    quality: float
+    metrics: dict
+    worker: str
+
+
+@message("controller.reset")
+class ControllerReset(Message):
+    """Start of a trial: the controller's learnt parameters and the body's signal layout."""
+
+    trial_id: int
+    seed: int
+    params: dict
+    sensors: list
+    commands: list
+
+
+@message("controller.sensors", stream=True)
+class SensorFrame(Message):
+    """One control tick of sensor values (layout: the body's ``SENSORS``)."""
+
+    trial_id: int
+    tick: int
+    values: np.ndarray
+
+
+@message("body.command", stream=True)
+class MotorCommand(Message):
+    """One control tick of commands (layout: the body's ``COMMANDS``), e.g. motor voltages."""
+
+    trial_id: int
+    tick: int
+    values: np.ndarray

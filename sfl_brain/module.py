@@ -1,0 +1,97 @@
+"""The base contract every brain module, controller and body implements.
+
+A module is plain Python: a frozen parameter schema (``Params``), ``reset(seed)``,
+and handler methods marked with :func:`on`, each taking one message type and
+returning the reply. Nothing here knows about Zenoh or processes; the runtime
+(:mod:`sfl_brain.host`) hosts a module in a process and routes messages to it.
+
+A complete module::
+
+    class Echo(Module):
+        class Params(ModuleParams):
+            gain: float = Field(1.0, ge=0)
+
+        def reset(self, seed: int) -> None:
+            self.rng = np.random.default_rng(seed)
+
+        @on(Grade)
+        def grade(self, msg: Grade) -> Reward:
+            return Reward(rho=self.params.gain * msg.eta, eta_min=0.0, eta_max=1.0)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, ClassVar
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict
+
+from .messages import Message
+
+
+class ModuleParams(BaseModel):
+    """Base of parameter schemas: frozen, keyword-only, unknown keys rejected."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+def on(message_type: type[Message]) -> Callable:
+    """Mark a method as the handler of ``message_type``."""
+
+    def mark(fn: Callable) -> Callable:
+        fn._sfl_handles = message_type
+        return fn
+
+    return mark
+
+
+class Module:
+    """Base of all hosted modules. Subclasses declare ``Params`` and ``@on`` handlers."""
+
+    Params: ClassVar[type[ModuleParams]] = ModuleParams
+    #: one-line description shown by ``sfl list`` (defaults to the docstring's first line)
+    summary: ClassVar[str] = ""
+    #: message types this module handles, filled from the ``@on`` marks
+    handles: ClassVar[dict[type[Message], str]] = {}
+    #: message types this module sends to others and needs a producer for
+    requires: ClassVar[tuple[type[Message], ...]] = ()
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        found: dict[type[Message], str] = {}
+        for klass in reversed(cls.__mro__):
+            for name, attr in vars(klass).items():
+                message_type = getattr(attr, "_sfl_handles", None)
+                if message_type is not None:
+                    found[message_type] = name
+        cls.handles = found
+
+    def __init__(self, params: ModuleParams | None = None, *, seed: int = 0) -> None:
+        self.params = params if params is not None else self.Params()
+        #: a ``rerun.RecordingStream`` when hosted with a recording, else None
+        self.recording = None
+        #: the entity path prefix this module logs under (its instance name)
+        self.entity = type(self).__name__.lower()
+        self.reset(seed)
+
+    def reset(self, seed: int) -> None:
+        """Return to the initial state; everything random draws from ``seed``."""
+        self.rng = np.random.default_rng(seed)
+
+    def handle(self, msg: Message) -> Message | None:
+        """Dispatch a message to its handler by type."""
+        name = self.handles.get(type(msg))
+        if name is None:
+            raise TypeError(f"{type(self).__name__} does not handle {msg.TAG!r}")
+        return getattr(self, name)(msg)
+
+    def close(self) -> None:
+        """Release resources (physics spaces, files). Called once by the host at exit."""
+
+    @classmethod
+    def describe(cls) -> str:
+        if cls.summary:
+            return cls.summary
+        doc = (cls.__doc__ or "").strip().splitlines()
+        return doc[0] if doc else cls.__name__

@@ -1,0 +1,60 @@
+"""Progress of a run on the terminal: trials done / planned, success rate, vigilance."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+from .protocols import Progress as RunProgress
+from .scenario import Plan
+
+
+class ProgressView:
+    def __init__(self, plan: Plan, enabled: bool = True) -> None:
+        self.plan = plan
+        self.console = Console(stderr=True)
+        self.enabled = enabled
+        self.bar = Progress(
+            TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+            TextColumn("{task.fields[status]}"), TimeElapsedColumn(), console=self.console,
+            disable=not enabled, transient=False,
+        )
+        self.task = None
+
+    def __enter__(self):
+        self.bar.start()
+        self.task = self.bar.add_task(f"{self.plan.scenario.name}: starting", total=None, status="")
+        return self
+
+    def __exit__(self, *exc):
+        self.bar.stop()
+        return False
+
+    def ready(self, seconds: float) -> None:
+        self.bar.update(self.task, description=f"{self.plan.scenario.name}: trials",
+                        status=f"modules ready in {seconds:.2f} s")
+
+    def update(self, p: RunProgress) -> None:
+        rate = p.successes / p.trials if p.trials else 0.0
+        status = f"success {rate:5.1%}"
+        if p.s_vig is not None:
+            status += f"  s_vig {p.s_vig:+.3f}"
+        if p.decisions:
+            status += f"  decisions {p.decisions}"
+        self.bar.update(self.task, total=p.planned, completed=p.trials, status=status)
+
+    def report(self, run_dir: Path, summary: dict) -> None:
+        c = self.console
+        colour = {"completed": "green", "failed": "red", "interrupted": "yellow"}[summary["status"]]
+        c.print(f"[{colour}]{summary['status']}[/]: {run_dir}")
+        if summary.get("reason"):
+            c.print(f"  reason: {summary['reason']}")
+        rate = summary.get("success_rate")
+        c.print(f"  trials {summary['trials']} (successes {summary['successes']}, failures {summary['failures']}), "
+                f"decisions {summary['decisions']} (no-go {summary['no_go']}), "
+                f"success rate {'-' if rate is None else f'{rate:.1%}'}, "
+                f"final vigilance {summary['final_vigilance'] if summary['final_vigilance'] is not None else '-'}, "
+                f"wall {summary['wall_time_s']:.1f} s")
+        c.print(f"  inspect: sfl inspect {run_dir}    view: rerun {run_dir / 'recording.rrd'}")

@@ -1,0 +1,256 @@
+"""Protocols the runtime runs: the learning cycle, the sweep and the exploit walk.
+
+A protocol talks to modules only through messages (``Conductor.call`` for brain
+modules, ``Conductor.trials`` for bodies), writes one record row per decision and
+per trial, and logs the same to Rerun.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+from collections import Counter, deque
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import messages as m
+from .records import RecordWriter
+from .runtime import Interrupted, RunError, Supervisor
+from .scenario import Plan
+
+MAX_TRIAL_RETRIES = 3
+
+
+def trial_seed(run_seed: int, trial_id: int) -> int:
+    """Seed of one trial: the same whichever worker runs it."""
+    return int(np.random.SeedSequence([run_seed, 7, trial_id]).generate_state(1)[0])
+
+
+@dataclass
+class Progress:
+    """What the CLI shows while a run goes on."""
+
+    planned: int
+    trials: int = 0
+    successes: int = 0
+    decisions: int = 0
+    s_vig: float | None = None
+    last: dict = field(default_factory=dict)
+
+
+class Conductor:
+    """The protocol's view of the running modules."""
+
+    def __init__(self, plan: Plan, supervisor: Supervisor, writer: RecordWriter, rerun_log,
+                 run_dir: Path, on_progress: Callable[[Progress], None] | None = None) -> None:
+        self.plan = plan
+        self.sup = supervisor
+        self.writer = writer
+        self.rr = rerun_log
+        self.run_dir = run_dir
+        self.on_progress = on_progress or (lambda p: None)
+        self.providers = plan.providers
+
+    def call(self, message: m.Message) -> m.Message:
+        return self.sup.call(self.providers[message.TAG], message)
+
+    def trials(self, requests: Iterable[m.TrialRequest]) -> Iterator[tuple[m.TrialRequest, m.TrialResult, float]]:
+        """Run trials on the body workers, each worker busy with one at a time.
+
+        Yields (request, result, wall seconds) as trials complete. A trial interrupted by a
+        body or controller crash is sent again (to any live worker), not counted as a failure.
+        """
+        todo = deque(requests)
+        busy: dict[int, tuple[str, m.TrialRequest, float]] = {}
+        retries: Counter = Counter()
+        timeout = self.plan.scenario.timeouts.trial
+        deadline_no_worker = None
+        while todo or busy:
+            in_use = {w for w, _, _ in busy.values()}
+            idle = [w for w in self.sup.workers() if w not in in_use]
+            while todo and idle:
+                worker = idle.pop(0)
+                request = todo.popleft()
+                token = self.sup.submit(worker, request, timeout)
+                busy[token] = (worker, request, time.perf_counter())
+            if not busy:
+                deadline_no_worker = deadline_no_worker or time.monotonic() + self.plan.scenario.timeouts.ready
+                if time.monotonic() > deadline_no_worker:
+                    raise RunError("no body worker is alive to run trials")
+                self.sup._handle(self.sup._next_event(0.5))
+                continue
+            deadline_no_worker = None
+            for token, result in self.sup.wait_any(list(busy)):
+                worker, request, started = busy.pop(token)
+                if isinstance(result, Interrupted):
+                    retries[request.trial_id] += 1
+                    if retries[request.trial_id] > MAX_TRIAL_RETRIES:
+                        raise RunError(f"trial {request.trial_id} interrupted {MAX_TRIAL_RETRIES + 1} times: {result}")
+                    print(f"sfl: trial {request.trial_id} interrupted ({result}); retrying", flush=True)
+                    todo.appendleft(request)
+                    continue
+                if isinstance(result, Exception):
+                    raise RunError(str(result))
+                yield request, result, time.perf_counter() - started
+
+    def trial_request(self, trial_id: int, unit: np.ndarray, log: bool) -> m.TrialRequest:
+        physical = self.plan.to_physical(unit)
+        return m.TrialRequest(trial_id=trial_id, seed=trial_seed(self.plan.scenario.seed, trial_id),
+                              body_params=physical["body"], controller_params=physical["controller"], log=log)
+
+    def should_log_body(self, trial_id: int) -> bool:
+        every = self.plan.scenario.record.body_every
+        return every > 0 and trial_id % every == 0
+
+    def physical_row(self, unit: np.ndarray) -> dict:
+        return {a.name: float(a.low + u * (a.high - a.low)) for a, u in zip(self.plan.scenario.space, unit, strict=True)}
+
+
+def run_learn(c: Conductor) -> dict:
+    """The success-failure learning cycle (Fig. 3.5 / 5.6): draw, evaluate, decide, trial, learn."""
+    proto = c.plan.scenario.protocol
+    dim = c.plan.dim
+    rng = np.random.default_rng(np.random.SeedSequence([c.plan.scenario.seed, 1]))
+    progress = Progress(planned=proto.trials)
+    threshold: m.Threshold = c.call(m.VigilanceStart())
+    n_success = n_failure = 0
+    decision = 0
+    consecutive_nogo = 0
+    stop_reason = "trial budget spent"
+    while progress.trials < proto.trials:
+        if decision >= proto.max_decisions:
+            stop_reason = f"max_decisions ({proto.max_decisions}) reached"
+            break
+        candidates = rng.random((proto.batch, dim))
+        evaluation: m.Evaluation = c.call(m.Evaluate(candidates=candidates, s_vig=threshold.s_vig))
+        rows = []
+        chosen = None
+        rejected_update = None
+        for i in range(proto.batch):
+            go = bool(evaluation.go[i])
+            row = {"kind": "decision", "decision": decision, "trial": progress.trials if go else None,
+                   "go": go, "s_vig": threshold.s_vig, "d_success": float(evaluation.d_success[i]),
+                   "d_failure": float(evaluation.d_failure[i]), "v_unit": candidates[i].tolist(),
+                   **c.physical_row(candidates[i])}
+            rows.append(row)
+            decision += 1
+            if go:
+                chosen = i
+                consecutive_nogo = 0
+                break
+            consecutive_nogo += 1
+            if consecutive_nogo % 1000 == 0:
+                rejected_update = consecutive_nogo
+                break  # the threshold may change: draw a new batch
+            if decision >= proto.max_decisions:
+                break
+        if c.plan.scenario.record.decisions:
+            c.writer.write_many(rows)
+        c.rr.decisions(rows)
+        progress.decisions = decision
+        if rejected_update is not None:
+            threshold = c.call(m.Rejected(consecutive=rejected_update))
+            continue
+        if chosen is None:
+            continue
+        v = candidates[chosen]
+        trial_id = progress.trials
+        (request, result, wall), = c.trials([c.trial_request(trial_id, v, c.should_log_body(trial_id))])
+        rho = None
+        if result.success:
+            reward: m.Reward = c.call(m.Grade(eta=result.quality))
+            rho = reward.rho
+            n_success += 1
+        else:
+            n_failure += 1
+        learned: m.Learned = c.call(m.Learn(v=v, success=result.success, rho=rho if rho is not None else 1.0))
+        s_vig_used = threshold.s_vig
+        low, high = threshold.low, threshold.high
+        threshold = c.call(m.TrialDone(trial_index=trial_id + 1, success=result.success,
+                                       n_success=n_success, n_failure=n_failure))
+        progress.trials += 1
+        progress.successes = n_success
+        progress.s_vig = threshold.s_vig
+        row = {"kind": "trial", "trial": trial_id, "decision": decision - 1, "success": result.success,
+               "quality": result.quality, "rho": rho, "n_success": n_success, "n_failure": n_failure,
+               "ns_nf": n_success / n_failure if n_failure else None,
+               "success_rate": n_success / progress.trials, "s_vig": s_vig_used, "band_low": low,
+               "band_high": high, "map_change": learned.change, "worker": result.worker,
+               "wall_ms": wall * 1e3, "v_unit": v.tolist(), **c.physical_row(v),
+               **{f"m_{k}": val for k, val in result.metrics.items()}}
+        c.writer.write(row)
+        c.rr.trial(row)
+        progress.last = row
+        c.on_progress(progress)
+    finish: m.Ack = c.call(m.Finish(path=str(c.run_dir / "acc.npz"), prune=proto.prune_failure_map))
+    return {"stop_reason": stop_reason, "acc": finish.detail}
+
+
+def grid_points(plan: Plan) -> np.ndarray:
+    """Unit coordinates of the sweep grid (``steps`` points per axis, ends included)."""
+    axes = [np.linspace(0.0, 1.0, a.steps) for a in plan.scenario.space]
+    return np.array(list(itertools.product(*axes)), dtype=float)
+
+
+def run_sweep(c: Conductor) -> dict:
+    """Evaluate every grid point on the body (no learning), fanned out over the workers."""
+    points = grid_points(c.plan)
+    progress = Progress(planned=len(points))
+    requests = (c.trial_request(i, p, c.should_log_body(i)) for i, p in enumerate(points))
+    for request, result, wall in c.trials(requests):
+        unit = points[request.trial_id]
+        progress.trials += 1
+        progress.successes += int(result.success)
+        row = {"kind": "trial", "trial": request.trial_id, "success": result.success, "quality": result.quality,
+               "worker": result.worker, "wall_ms": wall * 1e3, "v_unit": unit.tolist(),
+               "success_rate": progress.successes / progress.trials, **c.physical_row(unit),
+               **{f"m_{k}": val for k, val in result.metrics.items()}}
+        c.writer.write(row)
+        c.rr.trial(row)
+        progress.last = row
+        c.on_progress(progress)
+    return {"grid_points": len(points)}
+
+
+def run_exploit(c: Conductor) -> dict:
+    """Walk with success-map neurons chosen by condition, switching while walking (§3.5.2)."""
+    proto = c.plan.scenario.protocol
+    axes = [a.name for a in c.plan.scenario.space]
+    axis = axes.index(proto.condition)
+    spec = c.plan.scenario.space[axis]
+    conditions = np.linspace(0.0, 1.0, 41)
+    table: m.ExploitTable = c.call(m.Exploit(axis=axis, conditions=conditions))
+    # the controller receives the whole table and switches neurons by the sensed condition
+    physical_table = {
+        "condition": [float(spec.low + u * (spec.high - spec.low)) for u in table.conditions],
+        **{a.target.partition(".")[2]: [float(a.low + w * (a.high - a.low)) for w in table.weights[:, j]]
+           for j, a in enumerate(c.plan.scenario.space) if j != axis and a.target.startswith("controller.")},
+    }
+    progress = Progress(planned=proto.trials)
+    base = c.plan.to_physical(np.full(len(axes), 0.5))
+    for trial_id in range(proto.trials):
+        request = m.TrialRequest(trial_id=trial_id, seed=trial_seed(c.plan.scenario.seed, trial_id),
+                                 body_params=base["body"], controller_params={"switching_table": physical_table},
+                                 log=c.should_log_body(trial_id))
+        (_, result, wall), = c.trials([request])
+        progress.trials += 1
+        progress.successes += int(result.success)
+        row = {"kind": "trial", "trial": trial_id, "success": result.success, "quality": result.quality,
+               "worker": result.worker, "wall_ms": wall * 1e3, "success_rate": progress.successes / progress.trials,
+               **{f"m_{k}": val for k, val in result.metrics.items()}}
+        c.writer.write(row)
+        c.rr.trial(row)
+        progress.last = row
+        c.on_progress(progress)
+    return {"switching_table_size": len(conditions)}
+
+
+PROTOCOLS = {"learn": run_learn, "sweep": run_sweep, "exploit": run_exploit}
+
+
+def finite(x):
+    return x if x is None or math.isfinite(x) else None
