@@ -157,7 +157,7 @@ class Controller(Module):
         raise NotImplementedError
 
     @on(ControllerReset)
-    def _reset_trial(self, msg: ControllerReset) -> Ack:
+    def on_controller_reset(self, msg: ControllerReset) -> Ack:
         missing = [s for s in self.REQUIRED_SENSORS if s not in msg.sensors]
         if missing:
             raise ValueError(f"{type(self).__name__} needs sensors {missing}; body has {msg.sensors}")
@@ -169,6 +169,6 @@ class Controller(Module):
         return Ack()
 
     @on(SensorFrame)
-    def _tick(self, frame: SensorFrame) -> MotorCommand:
+    def on_sensor_frame(self, frame: SensorFrame) -> MotorCommand:
         values = self.step(frame.values[self._sensor_index])
         return MotorCommand(trial_id=frame.trial_id, tick=frame.tick, values=values)

@@ -1,0 +1,298 @@
+"""A planar RunBot-style biped on pymunk (thesis §3.4; Geng, Porr & Wörgötter's RunBot).
+
+Links (metres, kilograms; RunBot II public figures where known):
+
+* trunk: 0.10 x 0.06 box, 0.45 kg, its centre 0.04 m above the hip axis; its pitch is held
+  by a rotary spring-damper to the world, as RunBot walks on a boom (with a free trunk this
+  walker always falls; the boom is also why the thesis's walker is planar);
+* thigh 0.142 m, 0.20 kg; shank 0.125 m, 0.08 kg; curved foot: a 0.02 m radius disc at the
+  shank's end.
+
+Hips and knees are driven by DC motors: the controller's command is the motor voltage V
+of (3.6) and the torque is tau = K (V - k_e omega) (stall torque K V, back-EMF k_e), the
+electrical power R I^2 with I = (V - k_e omega) / R is integrated for the energy E_e of (5.6).
+Joint stops: hip [-70, 70] deg, knee [-110, 0] deg.
+
+Angles the controller sees: ``hip_l``/``hip_r`` in RunBot's convention, 90 deg = thigh along the
+trunk axis, larger = thigh swung forward; ``knee_l``/``knee_r`` 0 = straight, negative = flexed
+(radians for both); ``contact_l``/``contact_r`` ground contact 0/1; ``slope`` of the ground under
+the hip (radians, uphill positive); ``pitch`` of the trunk.
+
+A trial fails when the trunk's centre of mass comes below a shank's (§3.4.3), or when the
+walker makes no progress (the boom holds up a walker that stalls): success needs
+``min_distance`` metres forward and ``min_steps`` steps in ``duration`` seconds.
+
+Terrain: a constant slope ``slope_deg`` or a piecewise profile ``terrain``: a string of
+``length:slope_deg`` pieces separated by commas, e.g. ``"0.5:0,1.0:6,1.0:-4"``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pymunk
+from pydantic import Field
+
+from sfl_brain.body import Body, BodyParams
+from sfl_brain.messages import TrialRequest
+
+THIGH, SHANK, FOOT_R = 0.142, 0.125, 0.02
+GROUND_R = 0.01  # ground segments' radius: the surface is this far above the profile
+M_TRUNK, M_THIGH, M_SHANK = 0.45, 0.20, 0.08
+TRUNK_W, TRUNK_H, TRUNK_UP = 0.10, 0.06, 0.04
+HIP_LIMITS = (math.radians(-70), math.radians(70))
+KNEE_LIMITS = (math.radians(-110), 0.0)
+SENSORS = ("hip_l", "hip_r", "knee_l", "knee_r", "contact_l", "contact_r", "slope", "pitch")
+COMMANDS = ("v_hip_l", "v_hip_r", "v_knee_l", "v_knee_r")
+
+
+class PlanarBipedParams(BodyParams):
+    substeps: int = Field(10, ge=1, le=100, description="physics steps per control tick")
+    motor_gain: float = Field(0.15, gt=0, description="K: stall torque per volt, N m / V")
+    back_emf: float = Field(0.4, ge=0, description="k_e: V s / rad")
+    resistance: float = Field(4.0, gt=0, description="R: motor winding resistance, ohm")
+    trunk_stiffness: float = Field(8.0, ge=0, description="boom: trunk pitch spring, N m / rad")
+    trunk_damping: float = Field(0.2, ge=0, description="boom: trunk pitch damper, N m s / rad")
+    friction: float = Field(0.9, ge=0)
+    min_distance: float = Field(0.5, ge=0, description="m forward needed for a success")
+    min_steps: int = Field(4, ge=0, description="steps needed for a success")
+    finish_line: float = Field(1.5, gt=0, description="m: distance for the walking-efficiency speed (5.7)")
+    initial_speed: float = Field(0.3, ge=0, le=2, description="m/s forward at the start")
+
+
+class PlanarBiped(Body):
+    """Planar RunBot-style biped (pymunk), DC-motor hips and knees, trunk held by a boom spring."""
+
+    Params = PlanarBipedParams
+    SENSORS = SENSORS
+    COMMANDS = COMMANDS
+    TRIAL_PARAMS = ("slope_deg", "terrain")
+
+    # ------------------------------------------------------------------ world
+    def start_trial(self, request: TrialRequest) -> None:
+        p = self.params
+        self.pieces = self._terrain(request.body_params)
+        space = pymunk.Space()
+        space.gravity = (0.0, -9.81)
+        space.collision_slop = 0.001
+        space.iterations = 20
+        self.space = space
+        self._build_ground()
+        x0 = 0.2
+        ground0 = self.ground_height(x0)
+        hip_height = THIGH + SHANK + FOOT_R - 0.003
+        hip = pymunk.Vec2d(x0, ground0 + GROUND_R + hip_height * 0.985)
+        self.trunk = self._box(M_TRUNK, TRUNK_W, TRUNK_H, hip + (0, TRUNK_UP))
+        # stance (left) leg slightly forward of vertical, swing (right) leg behind, knee flexed
+        self.legs = []
+        for hip_angle, knee_angle in ((math.radians(8), math.radians(-2)), (math.radians(-18), math.radians(-35))):
+            self.legs.append(self._leg(hip, hip_angle, knee_angle))
+        boom = pymunk.DampedRotarySpring(self.trunk, space.static_body, 0.0, p.trunk_stiffness, p.trunk_damping)
+        space.add(boom)
+        for b in space.bodies:
+            b.velocity = (p.initial_speed, 0.0)
+        self.joints = [(self.trunk, self.legs[0][0]), (self.trunk, self.legs[1][0]),
+                       (self.legs[0][0], self.legs[0][1]), (self.legs[1][0], self.legs[1][1])]
+        self.t = 0.0
+        self.x_start = self.trunk.position.x
+        self.energy = 0.0
+        self.fell = False
+        self.steps = 0
+        self.contact = np.zeros(2)
+        self._last_foot = -1
+        self._voltage = np.zeros(4)
+        self._frames: list[np.ndarray] = [] if self.logging else None
+        self._trace: list[np.ndarray] = [] if self.logging else None
+        self.trial_id = request.trial_id
+        self._update_contacts()
+
+    def _terrain(self, body_params: dict) -> list[tuple[float, float]]:
+        profile = body_params.get("terrain")
+        if profile:
+            pieces = []
+            for part in str(profile).split(","):
+                length, _, slope = part.partition(":")
+                pieces.append((float(length), math.radians(float(slope))))
+            return pieces
+        return [(60.0, math.radians(float(body_params.get("slope_deg", 0.0))))]
+
+    def _build_ground(self) -> None:
+        xs, ys, slopes = [-2.0], [0.0], []
+        first_slope = self.pieces[0][1]
+        ys[0] = -2.0 * math.tan(first_slope)
+        x, y = 0.0, 0.0
+        xs.append(x)
+        ys.append(y)
+        slopes.append(first_slope)
+        for length, slope in self.pieces:
+            x += length * math.cos(slope)
+            y += length * math.sin(slope)
+            xs.append(x)
+            ys.append(y)
+            slopes.append(slope)
+        last = self.pieces[-1][1]
+        xs.append(x + 60.0)
+        ys.append(y + 60.0 * math.tan(last))
+        slopes.append(last)
+        self.ground_x, self.ground_y = np.array(xs), np.array(ys)
+        self.ground_slopes = np.array(slopes)
+        for i in range(len(xs) - 1):
+            seg = pymunk.Segment(self.space.static_body, (xs[i], ys[i]), (xs[i + 1], ys[i + 1]), GROUND_R)
+            seg.friction = self.params.friction
+            self.space.add(seg)
+
+    def ground_height(self, x: float) -> float:
+        return float(np.interp(x, self.ground_x, self.ground_y))
+
+    def ground_slope(self, x: float) -> float:
+        i = int(np.clip(np.searchsorted(self.ground_x, x) - 1, 0, len(self.ground_slopes) - 1))
+        return float(self.ground_slopes[i])
+
+    def _box(self, mass: float, w: float, h: float, position) -> pymunk.Body:
+        body = pymunk.Body(mass, pymunk.moment_for_box(mass, (w, h)))
+        body.position = position
+        shape = pymunk.Poly.create_box(body, (w, h))
+        shape.filter = pymunk.ShapeFilter(group=1)
+        self.space.add(body, shape)
+        return body
+
+    def _rod(self, mass: float, length: float, top, angle: float, foot: bool) -> pymunk.Body:
+        body = pymunk.Body(mass, pymunk.moment_for_segment(mass, (0, length / 2), (0, -length / 2), 0.01))
+        body.angle = angle
+        body.position = pymunk.Vec2d(*top) + pymunk.Vec2d(0, -length / 2).rotated(angle)
+        shapes = [pymunk.Segment(body, (0, length / 2), (0, -length / 2), 0.008)]
+        if foot:
+            shapes.append(pymunk.Circle(body, FOOT_R, (0, -length / 2)))
+        for s in shapes:
+            s.filter = pymunk.ShapeFilter(group=1)  # the robot does not collide with itself
+            s.friction = self.params.friction
+        self.space.add(body, *shapes)
+        return body
+
+    def _leg(self, hip, hip_angle: float, knee_angle: float):
+        thigh = self._rod(M_THIGH, THIGH, hip, hip_angle, foot=False)
+        knee = hip + pymunk.Vec2d(0, -THIGH).rotated(hip_angle)
+        shank = self._rod(M_SHANK, SHANK, knee, hip_angle + knee_angle, foot=True)
+        p = self.params
+        damping = p.motor_gain * p.back_emf  # back-EMF acts as viscous damping K k_e
+        self.space.add(
+            pymunk.PivotJoint(self.trunk, thigh, hip),
+            pymunk.PivotJoint(thigh, shank, knee),
+            pymunk.RotaryLimitJoint(self.trunk, thigh, *HIP_LIMITS),
+            pymunk.RotaryLimitJoint(thigh, shank, *KNEE_LIMITS),
+            pymunk.DampedRotarySpring(self.trunk, thigh, 0.0, 0.0, damping),
+            pymunk.DampedRotarySpring(thigh, shank, 0.0, 0.0, damping),
+        )
+        return thigh, shank
+
+    # ------------------------------------------------------------------ sensing
+    def _foot(self, leg: int) -> pymunk.Vec2d:
+        shank = self.legs[leg][1]
+        return shank.local_to_world((0, -SHANK / 2))
+
+    def _update_contacts(self) -> None:
+        for i in range(2):
+            foot = self._foot(i)
+            slope = self.ground_slope(foot.x)
+            clearance = (foot.y - self.ground_height(foot.x)) * math.cos(slope) - FOOT_R - GROUND_R
+            on = clearance < (0.004 if self.contact[i] else 0.002)  # hysteresis
+            if on and not self.contact[i] and i != self._last_foot:
+                self.steps += 1  # a step: the other foot touches down
+                self._last_foot = i
+            self.contact[i] = 1.0 if on else 0.0
+
+    def sense(self) -> np.ndarray:
+        trunk = self.trunk
+        (tl, sl), (tr, sr) = self.legs
+        half_pi = math.pi / 2
+        return np.array([
+            half_pi + tl.angle - trunk.angle, half_pi + tr.angle - trunk.angle,
+            sl.angle - tl.angle, sr.angle - tr.angle,
+            self.contact[0], self.contact[1],
+            self.ground_slope(trunk.position.x), trunk.angle,
+        ])
+
+    # ------------------------------------------------------------------ acting
+    def actuate(self, command: np.ndarray) -> None:
+        p = self.params
+        voltage = np.clip(np.asarray(command, dtype=float), -12.0, 12.0)
+        torque_per_volt = p.motor_gain
+        h = p.control_dt / p.substeps
+        joints = self.joints
+        for _ in range(p.substeps):
+            # tau = K V; the -K k_e omega part is the damper added at build time
+            for (parent, child), v in zip(joints, voltage, strict=True):
+                tau = torque_per_volt * v
+                child.torque += tau
+                parent.torque -= tau
+            self.space.step(h)
+        omega = np.array([c.angular_velocity - a.angular_velocity for a, c in joints])
+        current = (voltage - p.back_emf * omega) / p.resistance
+        self.energy += float(np.sum(p.resistance * current**2)) * p.control_dt  # (5.5)-(5.6)
+        self.t += p.control_dt
+        self._update_contacts()
+        trunk_y = self.trunk.position.y
+        if trunk_y < self.legs[0][1].position.y or trunk_y < self.legs[1][1].position.y:
+            self.fell = True  # trunk centre of mass below a shank's (§3.4.3)
+        if self._frames is not None:
+            self._record_frame()
+
+    @property
+    def done(self) -> bool:
+        return self.fell or self.t >= self.params.duration - 1e-9
+
+    def outcome(self) -> tuple[bool, float, dict]:
+        p = self.params
+        distance = self.trunk.position.x - self.x_start
+        velocity = distance / self.t if self.t > 0 else 0.0
+        success = (not self.fell) and distance >= p.min_distance and self.steps >= p.min_steps
+        mass = M_TRUNK + 2 * (M_THIGH + M_SHANK)
+        # walking efficiency (5.7)-(5.8): kinetic energy at the average speed over the energy spent
+        quality = 0.5 * mass * velocity**2 / self.energy if success and self.energy > 0 else 0.0
+        metrics = {"distance": distance, "velocity": velocity, "steps": self.steps, "time": self.t,
+                   "energy": self.energy, "fell": self.fell}
+        return success, quality, metrics
+
+    # ------------------------------------------------------------------ recording
+    def _record_frame(self) -> None:
+        (tl, sl), (tr, sr) = self.legs
+        hip = self.trunk.local_to_world((0, -TRUNK_UP))
+        pts = [self.trunk.position, hip, tl.local_to_world((0, -THIGH / 2)), self._foot(0),
+               tr.local_to_world((0, -THIGH / 2)), self._foot(1)]
+        self._frames.append(np.array([[q.x, q.y] for q in pts]))
+        self._trace.append(self.sense())
+
+    def log_trial(self, trial_id: int) -> None:
+        """Links as 2-D line strips and joint angles as scalars, on ``sim_time`` (trial k starts at k x duration)."""
+        import rerun as rr
+
+        if not self._frames:
+            return
+        rec = self.recording
+        frames = np.stack(self._frames)
+        trace = np.stack(self._trace)
+        n = len(frames)
+        times = trial_id * self.params.duration + self.params.control_dt * np.arange(1, n + 1)
+        idx = [rr.TimeColumn("sim_time", duration=times), rr.TimeColumn("trial", sequence=np.full(n, trial_id))]
+        for j, name in enumerate(SENSORS[:4]):
+            rec.send_columns(f"{self.entity}/joints/{name}", idx, rr.Scalars.columns(scalars=np.degrees(trace[:, j])))
+        rec.send_columns(f"{self.entity}/contacts/left", idx, rr.Scalars.columns(scalars=trace[:, 4]))
+        rec.send_columns(f"{self.entity}/contacts/right", idx, rr.Scalars.columns(scalars=trace[:, 5]))
+        every = max(1, int(round(0.04 / self.params.control_dt)))  # 25 pictures per simulated second
+        for k in range(0, n, every):
+            f = frames[k]
+            rec.set_time("sim_time", duration=float(times[k]))
+            rec.set_time("trial", sequence=trial_id)
+            rec.log(f"{self.entity}/walker", rr.LineStrips2D(
+                [[f[0], f[1]], [f[1], f[2], f[3]], [f[1], f[4], f[5]]],
+                colors=[(90, 90, 90), (40, 110, 220), (230, 140, 30)], radii=0.006))
+        x0 = float(frames[0, 1, 0]) - 0.5
+        x1 = float(frames[-1, 1, 0]) + 0.5
+        gx = np.linspace(x0, x1, 60)
+        rec.log(f"{self.entity}/ground", rr.LineStrips2D([np.column_stack([gx, np.interp(gx, self.ground_x,
+                                                                                          self.ground_y)])],
+                                                          colors=(120, 100, 80), radii=0.004))
+
+    def close(self) -> None:
+        self.space = None
