@@ -7,7 +7,7 @@ neighbourhood radius decay with the number of samples *this map* has learnt
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import Field
@@ -18,7 +18,7 @@ from sfl_brain.module import ModuleParams
 class SOMParams(ModuleParams):
     """Shape and schedule of a self-organising map."""
 
-    shape: tuple[int, ...] = Field((10, 10), min_length=1, max_length=4, description="neuron grid")
+    shape: tuple[Annotated[int, Field(ge=1, le=1000)], ...] = Field((10, 10), min_length=1, max_length=4, description="neuron grid")
     learning_rate: float = Field(0.4, gt=0, le=1, description="epsilon at the first sample (2.10)")
     learning_rate_min: float = Field(0.02, ge=0, le=1, description="floor of epsilon")
     radius: float | None = Field(None, gt=0, description="sigma at the first sample, grid units "

@@ -1,0 +1,99 @@
+import textwrap
+
+import pytest
+
+from sfl_brain.scenario import ScenarioError, load
+
+from .conftest import SCENARIOS, sfl
+
+BASE = """
+name: t
+seed: 1
+protocol: {kind: learn, trials: 5}
+space:
+  - {name: x, target: body.x, low: 0, high: 1}
+  - {name: y, target: body.y, low: 0, high: 1}
+modules:
+  acc: {impl: acc}
+  vigilance: {impl: vigilance, params: {mode: fixed}}
+  ofc: {impl: ofc}
+  body: {impl: analytic}
+"""
+
+
+def errors(write_scenario, text):
+    path = write_scenario(textwrap.dedent(text))
+    with pytest.raises(ScenarioError) as info:
+        load(path)
+    return str(info.value), path
+
+
+def test_shipped_scenarios_are_valid():
+    for path in sorted(SCENARIOS.glob("*.yaml")):
+        if "exploit" in path.name:
+            continue  # needs the maps of a learn run
+        load(path)
+
+
+def test_bad_enum_names_file_path_expected_given_and_nearest(write_scenario):
+    text, path = errors(write_scenario, BASE.replace("mode: fixed", "mode: adaptve"))
+    assert f"{path}: modules.vigilance.params.mode: expected one of 'fixed', 'scheduled' or 'adaptive'; " \
+           "got 'adaptve' (did you mean `adaptive`?)" in text
+
+
+def test_unknown_key_suggests_nearest(write_scenario):
+    text, _ = errors(write_scenario, BASE.replace("seed: 1", "sed: 1"))
+    assert "sed: unknown key" in text and "(did you mean `seed`?)" in text
+
+
+def test_unknown_module_param_suggests_nearest(write_scenario):
+    text, _ = errors(write_scenario, BASE.replace("params: {mode: fixed}", "params: {mode: fixed, stepp: 0.1}"))
+    assert "modules.vigilance.params.stepp: unknown key" in text and "`step`" in text
+
+
+def test_unknown_implementation_suggests_registered_name(write_scenario):
+    text, _ = errors(write_scenario, BASE.replace("impl: vigilance", "impl: vigilence"))
+    assert "modules.vigilance.impl: no registered implementation 'vigilence' (did you mean `vigilance`?)" in text
+
+
+def test_out_of_range_and_wrong_type(write_scenario):
+    text, _ = errors(write_scenario, BASE.replace("trials: 5", "trials: 0").replace("seed: 1", "seed: abc"))
+    assert "protocol.trials: input should be greater than or equal to 1; got 0" in text
+    assert "seed: input should be a valid integer" in text
+
+
+def test_missing_module_is_a_wiring_error(write_scenario):
+    text, _ = errors(write_scenario, BASE.replace("  ofc: {impl: ofc}\n", ""))
+    assert "protocol `learn` sends `ofc.grade` (to grade successful trials) but no module handles it" in text
+    assert "(did you mean `ofc: {impl: ofc}`?)" in text
+
+
+def test_axis_target_must_exist_on_the_body(write_scenario):
+    text, _ = errors(write_scenario, BASE.replace("target: body.y", "target: body.yy"))
+    assert "space.1.target: AnalyticBody takes trial parameters ['x', 'y', 'z']; got 'yy'" in text
+
+
+def test_controller_body_mismatch_names_both_ends(write_scenario):
+    text, _ = errors(write_scenario, BASE.replace("body: {impl: analytic}", "body: {impl: planar_biped}\n"
+                                                  "  controller: {impl: reflex}"))
+    assert "space.0.target: PlanarBiped takes trial parameters" in text
+
+
+def test_cli_check_exits_2_without_traceback(write_scenario):
+    path = write_scenario(textwrap.dedent(BASE.replace("kind: learn", "kind: lern")))
+    done = sfl("check", str(path))
+    assert done.returncode == 2
+    assert "Traceback" not in done.stderr
+    assert "protocol.kind: expected one of 'learn', 'sweep', 'exploit'; got 'lern' (did you mean `learn`?)" \
+        in done.stderr
+
+
+def test_cli_check_reports_yaml_syntax_errors(write_scenario):
+    path = write_scenario("name: [unclosed\n")
+    done = sfl("check", str(path))
+    assert done.returncode == 2 and "not valid YAML" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_set_overrides_are_validated_too():
+    done = sfl("check", str(SCENARIOS / "analytic_learn.yaml"), "--set", "modules.acc.params.shape=[0, 3]")
+    assert done.returncode == 2 and "modules.acc.params.shape.0" in done.stderr
