@@ -236,7 +236,7 @@ class PlanarBiped(Body):
         if trunk_y < self.legs[0][1].position.y or trunk_y < self.legs[1][1].position.y:
             self.fell = True  # trunk centre of mass below a shank's (§3.4.3)
         if self._frames is not None:
-            self._record_frame()
+            self._record_frame(voltage)
 
     @property
     def done(self) -> bool:
@@ -255,13 +255,13 @@ class PlanarBiped(Body):
         return success, quality, metrics
 
     # ------------------------------------------------------------------ recording
-    def _record_frame(self) -> None:
+    def _record_frame(self, voltage: np.ndarray) -> None:
         (tl, sl), (tr, sr) = self.legs
         hip = self.trunk.local_to_world((0, -TRUNK_UP))
         pts = [self.trunk.position, hip, tl.local_to_world((0, -THIGH / 2)), self._foot(0),
                tr.local_to_world((0, -THIGH / 2)), self._foot(1)]
         self._frames.append(np.array([[q.x, q.y] for q in pts]))
-        self._trace.append(self.sense())
+        self._trace.append(np.concatenate([self.sense(), voltage]))
 
     def log_trial(self, trial_id: int) -> None:
         """Links as 2-D line strips and joint angles as scalars, on ``sim_time`` (trial k starts at k x duration)."""
@@ -277,6 +277,8 @@ class PlanarBiped(Body):
         idx = [rr.TimeColumn("sim_time", duration=times), rr.TimeColumn("trial", sequence=np.full(n, trial_id))]
         for j, name in enumerate(SENSORS[:4]):
             rec.send_columns(f"{self.entity}/joints/{name}", idx, rr.Scalars.columns(scalars=np.degrees(trace[:, j])))
+        for j, name in enumerate(COMMANDS):  # motor voltages (3.6): the motor neurons' net output
+            rec.send_columns(f"{self.entity}/motors/{name}", idx, rr.Scalars.columns(scalars=trace[:, 8 + j]))
         rec.send_columns(f"{self.entity}/contacts/left", idx, rr.Scalars.columns(scalars=trace[:, 4]))
         rec.send_columns(f"{self.entity}/contacts/right", idx, rr.Scalars.columns(scalars=trace[:, 5]))
         every = max(1, int(round(0.04 / self.params.control_dt)))  # 25 pictures per simulated second

@@ -1,0 +1,165 @@
+"""End to end: real processes, a real Zenoh mesh on loopback, real Rerun files read back."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pandas as pd
+import psutil
+import pytest
+import zenoh
+from rerun.chunk import RrdReader
+
+from sfl_brain import bus
+from sfl_brain.local import run_local
+from sfl_brain.records import read_records
+from sfl_brain.scenario import load
+
+from .conftest import ROOT, SCENARIOS, sfl
+
+VOLATILE = {"wall_ms", "worker"}
+
+
+def stable(rows):
+    return [{k: v for k, v in r.items() if k not in VOLATILE} for r in rows]
+
+
+def rrd_rows(path):
+    counts = {}
+    for chunk in RrdReader(path).stream().to_chunks():
+        counts[chunk.entity_path] = counts.get(chunk.entity_path, 0) + chunk.num_rows
+    return counts
+
+
+def test_learn_run_records_everything_and_matches_in_process(tmp_path):
+    out = tmp_path / "run"
+    done = sfl("run", str(SCENARIOS / "analytic_learn.yaml"), "--set", "protocol.trials=60", "--out", str(out),
+               "--quiet")
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "completed" and summary["trials"] == 60
+    frame = pd.read_json(out / "records.jsonl", lines=True)
+    trials, decisions = frame[frame.kind == "trial"], frame[frame.kind == "decision"]
+    assert len(trials) == 60 and decisions.go.sum() == 60 and len(decisions) == summary["decisions"]
+    assert {"d_success", "d_failure", "s_vig", "v_unit", "x", "y"} <= set(decisions.columns)
+    assert {"success", "quality", "rho", "n_success", "n_failure", "ns_nf"} <= set(trials.columns)
+    # every decision and every trial is in the Rerun recording, logged by the processes
+    counts = rrd_rows(out / "recording.rrd")
+    assert counts["/decisions/margin"] == len(decisions)
+    assert counts["/trials/success"] == 60
+    assert counts["/acc/success_map/neurons"] >= 60  # the ACC process logged its maps per trial
+    # same scenario and seed in one process: identical records
+    local = run_local(load(SCENARIOS / "analytic_learn.yaml", ["protocol.trials=60"]))
+    assert stable(local) == stable(read_records(out))
+    # sfl inspect --json prints exactly the summary fields
+    inspected = json.loads(sfl("inspect", str(out), "--json").stdout)
+    assert set(inspected) == {"trials", "successes", "failures", "decisions", "no_go", "success_rate",
+                              "final_vigilance", "best_quality", "wall_time_s"}
+    assert inspected["trials"] == 60 and inspected["no_go"] == summary["no_go"]
+
+
+def test_crashed_body_is_restarted_and_its_trial_retried(tmp_path):
+    marker = tmp_path / "crashed"
+    out = tmp_path / "run"
+    done = sfl("run", str(SCENARIOS / "analytic_learn.yaml"), "--set", "protocol.trials=20",
+               "--set", "modules.body.params.crash_at_trial=5", "--set", f"modules.body.params.crash_marker={marker}",
+               "--set", "modules.body.restart=on-failure", "--out", str(out), "--quiet")
+    assert done.returncode == 0, done.stderr
+    assert marker.exists()
+    assert "module `body` died (exit code 3); restarting" in done.stderr
+    trials = [r for r in read_records(out) if r["kind"] == "trial"]
+    assert [r["trial"] for r in trials] == list(range(20))  # retried, not counted as a failure
+    expected = run_local(load(SCENARIOS / "analytic_learn.yaml", ["protocol.trials=20"]))
+    assert stable(read_records(out)) == stable(expected)
+
+
+def test_dead_module_without_restart_is_reported_and_records_survive(tmp_path):
+    out = tmp_path / "run"
+    done = sfl("run", str(SCENARIOS / "analytic_learn.yaml"), "--set", "protocol.trials=20",
+               "--set", "modules.body.params.crash_at_trial=5", "--out", str(out), "--quiet")
+    assert done.returncode == 1
+    assert "module `body`" in done.stderr and "died with exit code 3" in done.stderr
+    assert "Traceback" not in done.stderr.split("its log")[0]
+    trials = [r for r in read_records(out) if r["kind"] == "trial"]
+    assert [r["trial"] for r in trials] == list(range(5))
+    assert json.loads(sfl("inspect", str(out), "--json").stdout)["trials"] == 5
+
+
+def _start(args, tmp_path):
+    return subprocess.Popen([sys.executable, "-m", "sfl_brain.cli", "run", *args], cwd=ROOT, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def _wait_for(predicate, timeout=60.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def test_garbage_on_the_bus_is_logged_and_dropped(tmp_path):
+    endpoint = bus.free_endpoint()
+    out = tmp_path / "run"
+    proc = _start([str(SCENARIOS / "analytic_learn.yaml"), "--set", "protocol.trials=3000", "--listen", endpoint,
+                   "--out", str(out), "--quiet"], tmp_path)
+    line = proc.stdout.readline()
+    assert "run id" in line, line
+    run_id = line.split("run id ")[1].split(";")[0]
+    with zenoh.open(bus.config(["tcp/127.0.0.1:0"], [endpoint])) as session:
+        errors = []
+        for target in ("acc/acc.evaluate", "vigilance/vigilance.trial_done", "ofc/ofc.grade", "body/body.trial"):
+            for reply in session.get(f"sfl/{run_id}/{target}", payload=b"\x00garbage\xff", timeout=10):
+                errors.append(reply.err.payload.to_string() if reply.err else "ok?")
+        session.put(f"sfl/{run_id}/acc/acc.evaluate", b"not even a query")
+    assert len(errors) == 4 and all(e.startswith("malformed request") for e in errors), errors
+    assert proc.wait(timeout=240) == 0, proc.stderr.read()
+    assert json.loads((out / "summary.json").read_text())["trials"] == 3000
+    assert "dropped malformed request" in (out / "logs" / "acc.log").read_text()
+
+
+def test_ctrl_c_stops_every_child_and_keeps_records(tmp_path):
+    out = tmp_path / "run"
+    proc = _start([str(SCENARIOS / "quickstart.yaml"), "--set", "protocol.trials=100000", "--out", str(out),
+                   "--quiet"], tmp_path)
+    records = out / "records.jsonl"
+    assert _wait_for(lambda: records.exists() and records.read_text().count('"kind":"trial"') >= 2, 120)
+    children = psutil.Process(proc.pid).children(recursive=True)
+    assert len(children) == 5
+    started = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    assert proc.wait(timeout=10) == 130
+    assert time.monotonic() - started < 5.0
+    gone, alive = psutil.wait_procs(children, timeout=1)
+    assert not alive, f"orphans: {alive}"
+    summary = json.loads(sfl("inspect", str(out), "--json").stdout)
+    assert summary["trials"] >= 2
+    assert json.loads((out / "summary.json").read_text())["status"] == "interrupted"
+
+
+def test_user_module_from_a_file_is_swapped_in(tmp_path):
+    """The README's example: a brain module in one short file, named by path in a scenario."""
+    out = tmp_path / "run"
+    done = sfl("run", str(ROOT / "docs" / "examples" / "cautious.yaml"), "--set", "protocol.trials=30",
+               "--out", str(out), "--quiet")
+    assert done.returncode == 0, done.stderr
+    trials = [r for r in read_records(out) if r["kind"] == "trial"]
+    assert len(trials) == 30
+    # the user's module raised the threshold after each failure: s_vig never decreased
+    s_vig = [r["s_vig"] for r in trials]
+    assert all(b >= a for a, b in zip(s_vig, s_vig[1:])) and s_vig[-1] > s_vig[0]
+
+
+@pytest.mark.skipif(os.cpu_count() < 2, reason="needs two cores")
+def test_sweep_fans_out_over_workers(tmp_path):
+    out = tmp_path / "run"
+    done = sfl("run", str(SCENARIOS / "analytic_sweep.yaml"), "--set", "modules.body.workers=2", "--out", str(out),
+               "--quiet")
+    assert done.returncode == 0, done.stderr
+    trials = [r for r in read_records(out) if r["kind"] == "trial"]
+    assert sorted(r["trial"] for r in trials) == list(range(121))
+    assert {r["worker"] for r in trials} == {"body.0", "body.1"}
