@@ -1,0 +1,83 @@
+"""The planar biped and the reflexive controller (thesis chapter 3)."""
+
+import json
+
+import numpy as np
+
+from bodies.planar_biped import PlanarBiped
+from modules.controllers.reflex import ReflexController, sensor_neuron
+from sfl_brain.body import InProcessLink
+from sfl_brain.local import run_local
+from sfl_brain.messages import TrialRequest
+from sfl_brain.records import read_records
+from sfl_brain.scenario import load
+
+from .conftest import SCENARIOS, sfl
+from .test_e2e import rrd_rows, stable
+
+
+def trial(alpha, theta, slope=0.0, duration=10.0):
+    body = PlanarBiped(PlanarBiped.Params(duration=duration))
+    body.link = InProcessLink(ReflexController())
+    return body, body.handle(TrialRequest(trial_id=0, seed=0, body_params={"slope_deg": slope},
+                                          controller_params={"alpha_hip": alpha, "theta_hip_max_deg": theta},
+                                          log=False))
+
+
+def test_golden_structure():
+    body, _ = trial(10, 110, duration=0.05)
+    assert len(body.space.bodies) == 5  # trunk, two thighs, two shanks
+    kinds = sorted(type(c).__name__ for c in body.space.constraints)
+    assert kinds.count("PivotJoint") == 4 and kinds.count("RotaryLimitJoint") == 4
+    assert kinds.count("DampedRotarySpring") == 5  # 4 motor back-EMF dampers + the boom
+    assert body.space.collision_slop == 0.001
+    mass = sum(b.mass for b in body.space.bodies)
+    assert abs(mass - (0.45 + 2 * (0.20 + 0.08))) < 1e-9
+
+
+def test_sensor_neuron_3_4():
+    assert sensor_neuron(10.0, 1.0, 1.0) == 0.5
+    assert sensor_neuron(10.0, 1.0, 2.0) > 0.99 and sensor_neuron(10.0, 1.0, 0.0) < 0.01
+
+
+def test_a_good_gait_walks_and_is_deterministic():
+    _, first = trial(10, 110)
+    _, second = trial(10, 110)
+    assert first == second
+    assert first.success and not first.metrics["fell"]
+    assert first.metrics["distance"] > 2.0 and first.metrics["steps"] >= 10
+    assert first.quality > 0 and first.metrics["energy"] > 0
+
+
+def test_no_hip_swing_falls_and_is_detected_as_a_fall():
+    _, result = trial(0.0, 120)  # alpha 0: the extensor sensor half-inhibits the swing for ever
+    assert not result.success and result.metrics["fell"]
+    assert result.metrics["time"] < 10.0  # the trial stopped at the fall
+
+
+def test_too_long_a_stride_stalls_and_is_not_a_success():
+    _, result = trial(10, 145)
+    assert not result.success and not result.metrics["fell"] and result.metrics["distance"] < 0.5
+
+
+def test_slope_changes_the_outcome():
+    outcomes = {s: [trial(a, t, slope=s)[1].success for a in (5, 10, 15) for t in (100, 110, 120, 130)]
+                for s in (-6.0, 0.0, 6.0)}
+    assert outcomes[-6.0] != outcomes[6.0]
+
+
+def test_learning_run_end_to_end_with_processes(tmp_path):
+    out = tmp_path / "run"
+    done = sfl("run", str(SCENARIOS / "quickstart.yaml"), "--set", "protocol.trials=12", "--set",
+               "record.body_every=4", "--out", str(out), "--quiet")
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["trials"] == 12 and summary["status"] == "completed"
+    # lockstep over Zenoh gives the same trials as the same scenario in one process
+    local = run_local(load(SCENARIOS / "quickstart.yaml", ["protocol.trials=12"]))
+    assert stable(local) == stable(read_records(out))
+    counts = rrd_rows(out / "recording.rrd")
+    assert counts["/body/walker"] > 0 and counts["/body/joints/hip_l"] > 0 and counts["/body/motors/v_hip_l"] > 0
+    assert counts["/trials/success"] == 12 and counts["/acc/success_map/neurons"] >= 12
+    assert (out / "acc.npz").exists()
+    np.load(out / "acc.npz")["success_weights"].shape == (100, 2)
