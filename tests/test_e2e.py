@@ -111,6 +111,8 @@ def test_garbage_on_the_bus_is_logged_and_dropped(tmp_path):
     assert "run id" in line, line
     run_id = line.split("run id ")[1].split(";")[0]
     with zenoh.open(bus.config(["tcp/127.0.0.1:0"], [endpoint])) as session:
+        # wait until this new peer sees every module of the run (gossip has reached it)
+        assert _wait_for(lambda: len(list(session.liveliness().get(bus.alive_key(run_id, "*"), timeout=1.0))) == 4)
         errors = []
         for target in ("acc/acc.evaluate", "vigilance/vigilance.trial_done", "ofc/ofc.grade", "body/body.trial"):
             for reply in session.get(f"sfl/{run_id}/{target}", payload=b"\x00garbage\xff", timeout=10):

@@ -1,0 +1,118 @@
+"""Wall time of one 10-s trial of the planar walker, three ways, plus the parallel grid.
+
+    python benchmarks/planar.py [--repeats 5] [--grid 11]
+
+(a) physics only, fixed open-loop command; (b) reflexive controller and body in one process;
+(c) controller and body as two processes over Zenoh (lockstep, 1000 ticks);
+then a sweep of a grid x grid subset of the E3.1 grid with 1 and with 2 body workers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import spawn_host, wait_alive  # noqa: E402
+
+from bodies.planar_biped import PlanarBiped  # noqa: E402
+from modules.controllers.reflex import ReflexController  # noqa: E402
+from sfl_brain import bus  # noqa: E402
+from sfl_brain.body import InProcessLink  # noqa: E402
+from sfl_brain.host import BusLink  # noqa: E402
+from sfl_brain.messages import TrialRequest  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+REQUEST = TrialRequest(trial_id=0, seed=0, body_params={"slope_deg": 0.0},
+                       controller_params={"alpha_hip": 10.0, "theta_hip_max_deg": 110.0}, log=False)
+
+
+def physics_only() -> float:
+    body = PlanarBiped()
+    body.logging = False
+    body.start_trial(REQUEST)
+    command = np.array([1.0, -1.0, 0.5, 0.5])
+    t = time.perf_counter()
+    for _ in range(1000):
+        body.actuate(command)
+    return time.perf_counter() - t
+
+
+def one_process() -> float:
+    body = PlanarBiped()
+    body.link = InProcessLink(ReflexController())
+    t = time.perf_counter()
+    result = body.handle(REQUEST)
+    assert result.metrics["time"] >= 9.99, result
+    return time.perf_counter() - t
+
+
+def processes(session, endpoint, repeats) -> list[float]:
+    run_id = "benchplanar"
+    spec = {"run_id": run_id, "instance": "controller", "spec_name": "controller",
+            "reference": "modules.controllers.reflex:ReflexController", "params": {}, "seed": 0,
+            "routes": {"body.command": "body"}, "listen": ["tcp/127.0.0.1:0"], "connect": [endpoint],
+            "rrd": None, "viewer": None, "tick_timeout": 10.0}
+    proc = spawn_host(spec)
+    wait_alive(session, bus.alive_key(run_id, "controller"))
+    body = PlanarBiped()
+    body.link = BusLink(session, run_id, "body", "controller", 10.0)
+    out = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        result = body.handle(REQUEST)
+        out.append(time.perf_counter() - t)
+    assert result.metrics["time"] >= 9.99
+    body.link.close()
+    proc.terminate()
+    proc.wait(timeout=10)
+    return out
+
+
+def sweep(workers: int, grid: int) -> float:
+    from sfl_brain.run import run
+    from sfl_brain.scenario import load
+
+    plan = load(ROOT / "scenarios" / "e3_1_viability.yaml",
+                [f"modules.body.workers={workers}", f"space.0.steps={grid}", f"space.1.steps={grid}",
+                 "record.body_every=0"])
+    with tempfile.TemporaryDirectory() as tmp:
+        t = time.perf_counter()
+        _, summary = run(plan, Path(tmp) / "run")
+        assert summary["status"] == "completed", summary
+        return time.perf_counter() - t
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--grid", type=int, default=11)
+    args = parser.parse_args()
+    a = np.median([physics_only() for _ in range(args.repeats)])
+    b = np.median([one_process() for _ in range(args.repeats)])
+    endpoint = bus.free_endpoint()
+    session = bus.open_session([endpoint], [])
+    try:
+        c = np.median(processes(session, endpoint, args.repeats))
+    finally:
+        session.close()
+    print(f"one 10-s trial (1000 control ticks, 10 000 physics steps), median of {args.repeats}:")
+    print(f"  (a) physics only, open loop         {a * 1e3:7.1f} ms  ({10 / a:5.1f}x real time)")
+    print(f"  (b) controller + body, one process  {b * 1e3:7.1f} ms  ({10 / b:5.1f}x real time)")
+    print(f"  (c) controller + body over Zenoh    {c * 1e3:7.1f} ms  ({10 / c:5.1f}x real time; goal >= 20x)")
+    print(f"  (c)/(b) = {c / b:.2f} (goal <= 1.5)   (b)/(a) = {b / a:.2f}")
+    print(f"  500 walking trials at (c): <= {500 * c:.0f} s (goal: E3.2 under 240 s; falls end trials early)")
+    one = sweep(1, args.grid)
+    two = sweep(2, args.grid)
+    n = args.grid**2
+    print(f"sweep of {n} grid points (E3.1 subset), whole sfl run: 1 worker {one:.1f} s, 2 workers {two:.1f} s, "
+          f"speed-up {one / two:.2f}x (goal >= 1.7x)")
+
+
+if __name__ == "__main__":
+    main()
