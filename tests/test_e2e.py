@@ -59,6 +59,18 @@ def test_learn_run_records_everything_and_matches_in_process(tmp_path):
     assert set(inspected) == {"trials", "successes", "failures", "decisions", "no_go", "success_rate",
                               "final_vigilance", "best_quality", "wall_time_s"}
     assert inspected["trials"] == 60 and inspected["no_go"] == summary["no_go"]
+    # sfl report draws the maps over the tried points and tabulates the run
+    report = sfl("report", str(out), "--out", str(tmp_path / "report"))
+    assert report.returncode == 0, report.stderr
+    assert (tmp_path / "report" / "run.png").stat().st_size > 10_000
+    assert "| run | learn | 0.0 | 60 |" in (tmp_path / "report" / "README.md").read_text()
+
+
+def test_sfl_list_names_every_registered_implementation():
+    listing = sfl("list").stdout
+    for name, kind in (("acc", "brain"), ("vigilance", "brain"), ("ofc", "brain"), ("reflex", "controller"),
+                       ("planar_biped", "body"), ("analytic", "body")):
+        assert any(line.split()[:2] == [name, kind] for line in listing.splitlines()), listing
 
 
 def test_crashed_body_is_restarted_and_its_trial_retried(tmp_path):
