@@ -24,11 +24,11 @@ import zenoh
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import spawn_host, stats, wait_alive  # noqa: E402
 
+from modules.controllers.open_loop import OpenLoopController  # noqa: E402
 from sfl_brain import bus  # noqa: E402
 from sfl_brain.body import InProcessLink  # noqa: E402
 from sfl_brain.host import BusLink  # noqa: E402
 from sfl_brain.messages import ControllerReset, SensorFrame  # noqa: E402
-from modules.controllers.open_loop import OpenLoopController  # noqa: E402
 
 PONG = textwrap.dedent("""
     import sys, zenoh
@@ -113,9 +113,10 @@ def in_process_round_trips(ticks):
 
 
 def startup(repeats=3):
+    import tempfile
+
     from sfl_brain.run import run
     from sfl_brain.scenario import load
-    import tempfile
 
     ready = []
     root = Path(__file__).resolve().parents[1]

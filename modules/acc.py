@@ -23,7 +23,7 @@ from sfl_brain.messages import (
     Learn,
     Learned,
 )
-from sfl_brain.module import Module, ModuleParams, on
+from sfl_brain.module import Module, on
 
 from .som import SelfOrganisingMap, SOMParams
 

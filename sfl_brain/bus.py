@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import socket
+
 import zenoh
 
 #: keep-alive lease: a silent peer is declared gone after this many ms

@@ -25,7 +25,7 @@ from typing import Any
 import zenoh
 
 from . import bus
-from .body import Body, Controller, InProcessLink
+from .body import Body, InProcessLink
 from .messages import ControllerReset, Message, MessageError, MotorCommand, SensorFrame, decode, encode
 from .module import Module
 from .registry import resolve
