@@ -26,3 +26,10 @@ def wait_alive(session, key: str, timeout: float = 30.0) -> None:
         if list(session.liveliness().get(key, timeout=1.0)):
             return
     raise RuntimeError(f"{key} not alive")
+
+
+def controller_spec(run_id: str, reference: str, endpoint: str) -> dict:
+    """Host spec of a controller process that answers a body named ``body`` on ``endpoint``."""
+    return {"run_id": run_id, "instance": "controller", "spec_name": "controller", "reference": reference,
+            "params": {}, "seed": 0, "routes": {"body.command": "body"}, "listen": ["tcp/127.0.0.1:0"],
+            "connect": [endpoint], "rrd": None, "viewer": None, "tick_timeout": 10.0}

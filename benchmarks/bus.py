@@ -22,7 +22,7 @@ import numpy as np
 import zenoh
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import spawn_host, stats, wait_alive  # noqa: E402
+from _common import controller_spec, spawn_host, stats, wait_alive  # noqa: E402
 
 from modules.controllers.open_loop import OpenLoopController  # noqa: E402
 from sfl_brain import bus  # noqa: E402
@@ -51,13 +51,10 @@ def raw_round_trips(session, endpoint, ticks):
     proc = subprocess.Popen([sys.executable, "-c", PONG.format(root=str(Path(__file__).resolve().parents[1])),
                              endpoint])
     wait_alive(session, "bench/pong")
-    got = []
-    sub = session.declare_subscriber("bench/pong", zenoh.handlers.Callback(lambda s: got.append(1), indirect=False))
-    pub = session.declare_publisher("bench/ping")
     import queue
 
+    pub = session.declare_publisher("bench/ping")
     q = queue.SimpleQueue()
-    sub.undeclare()
     sub = session.declare_subscriber("bench/pong", zenoh.handlers.Callback(lambda s: q.put(s.payload.to_bytes()),
                                                                               indirect=False))
     payload = b"x" * 100
@@ -77,10 +74,7 @@ def raw_round_trips(session, endpoint, ticks):
 
 def framework_round_trips(session, endpoint, ticks):
     run_id = "benchbus"
-    spec = {"run_id": run_id, "instance": "controller", "spec_name": "controller",
-            "reference": "modules.controllers.open_loop:OpenLoopController", "params": {}, "seed": 0,
-            "routes": {"body.command": "body"}, "listen": ["tcp/127.0.0.1:0"], "connect": [endpoint],
-            "rrd": None, "viewer": None, "tick_timeout": 10.0}
+    spec = controller_spec(run_id, "modules.controllers.open_loop:OpenLoopController", endpoint)
     proc = spawn_host(spec)
     wait_alive(session, bus.alive_key(run_id, "controller"))
     link = BusLink(session, run_id, "body", "controller", 10.0)

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import spawn_host, wait_alive  # noqa: E402
+from _common import controller_spec, spawn_host, wait_alive  # noqa: E402
 
 from bodies.planar_biped import PlanarBiped  # noqa: E402
 from modules.controllers.reflex import ReflexController  # noqa: E402
@@ -54,10 +54,7 @@ def one_process() -> float:
 
 def processes(session, endpoint, repeats) -> list[float]:
     run_id = "benchplanar"
-    spec = {"run_id": run_id, "instance": "controller", "spec_name": "controller",
-            "reference": "modules.controllers.reflex:ReflexController", "params": {}, "seed": 0,
-            "routes": {"body.command": "body"}, "listen": ["tcp/127.0.0.1:0"], "connect": [endpoint],
-            "rrd": None, "viewer": None, "tick_timeout": 10.0}
+    spec = controller_spec(run_id, "modules.controllers.reflex:ReflexController", endpoint)
     proc = spawn_host(spec)
     wait_alive(session, bus.alive_key(run_id, "controller"))
     body = PlanarBiped()
