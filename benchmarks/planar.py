@@ -1,10 +1,11 @@
 """Wall time of one 10-s trial of the planar walker, three ways, plus the parallel grid.
 
-    python benchmarks/planar.py [--repeats 5] [--grid 11]
+    python benchmarks/planar.py [--repeats 5] [--grid 15]
 
 (a) physics only, fixed open-loop command; (b) reflexive controller and body in one process;
 (c) controller and body as two processes over Zenoh (lockstep, 1000 ticks);
-then a sweep of a grid x grid subset of the E3.1 grid with 1 and with 2 body workers.
+then a sweep of a grid x grid subset of the E3.1 grid with 1 and with 2 body workers, with the
+controllers colocated in the body workers and as separate processes.
 """
 
 from __future__ import annotations
@@ -71,13 +72,13 @@ def processes(session, endpoint, repeats) -> list[float]:
     return out
 
 
-def sweep(workers: int, grid: int) -> float:
+def sweep(workers: int, grid: int, colocate: bool) -> float:
     from sfl_brain.run import run
     from sfl_brain.scenario import load
 
     plan = load(ROOT / "scenarios" / "e3_1_viability.yaml",
                 [f"modules.body.workers={workers}", f"space.0.steps={grid}", f"space.1.steps={grid}",
-                 "record.body_every=0"])
+                 "record.body_every=0", f"modules.controller.colocate={str(colocate).lower()}"])
     with tempfile.TemporaryDirectory() as tmp:
         t = time.perf_counter()
         _, summary = run(plan, Path(tmp) / "run")
@@ -88,7 +89,7 @@ def sweep(workers: int, grid: int) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--grid", type=int, default=11)
+    parser.add_argument("--grid", type=int, default=15)
     args = parser.parse_args()
     a = np.median([physics_only() for _ in range(args.repeats)])
     b = np.median([one_process() for _ in range(args.repeats)])
@@ -104,11 +105,13 @@ def main() -> None:
     print(f"  (c) controller + body over Zenoh    {c * 1e3:7.1f} ms  ({10 / c:5.1f}x real time; goal >= 20x)")
     print(f"  (c)/(b) = {c / b:.2f} (goal <= 1.5)   (b)/(a) = {b / a:.2f}")
     print(f"  500 walking trials at (c): <= {500 * c:.0f} s (goal: E3.2 under 240 s; falls end trials early)")
-    one = sweep(1, args.grid)
-    two = sweep(2, args.grid)
     n = args.grid**2
-    print(f"sweep of {n} grid points (E3.1 subset), whole sfl run: 1 worker {one:.1f} s, 2 workers {two:.1f} s, "
-          f"speed-up {one / two:.2f}x (goal >= 1.7x)")
+    print(f"sweep of {n} grid points (E3.1 subset), whole sfl run including start-up:")
+    for colocate, label in ((True, "controller inside each body worker (colocate: true)"),
+                            (False, "controller as its own process per worker")):
+        one = sweep(1, args.grid, colocate)
+        two = sweep(2, args.grid, colocate)
+        print(f"  {label}: 1 worker {one:.1f} s, 2 workers {two:.1f} s, speed-up {one / two:.2f}x (goal >= 1.7x)")
 
 
 if __name__ == "__main__":

@@ -3,8 +3,10 @@
 The host opens a Zenoh peer session, answers each request type the module
 handles on ``sfl/<run>/<instance>/<tag>``, publishes replies to stream messages
 (lockstep ticks) to the instance named in its routes, and declares a liveliness
-token once it is ready. Everything received is handed to one loop in the main
-thread (callbacks only enqueue), so the module never sees two messages at once.
+token once it is ready. Requests are handed to one loop in the main thread (a
+trial may run for seconds); lockstep stream messages are answered by a thread
+that blocks in the subscriber's channel. A lock makes sure the module never sees
+two messages at once.
 
 A malformed or unknown message is logged and dropped (a request gets an error
 reply). The host exits on SIGTERM, or when its parent goes away (stdin closes).
@@ -40,46 +42,66 @@ class LinkError(RuntimeError):
 
 
 class BusLink:
-    """A body's link to a controller in another process: lockstep pub/sub per tick."""
+    """A body's link to a controller in another process: lockstep pub/sub per tick.
+
+    The body's thread publishes a frame and blocks in the subscriber's ring channel for the
+    command (no Python thread handoff on the tick path). A watchdog thread wakes the body with
+    an empty payload if a command is overdue, so a dead or hung controller interrupts the trial
+    after ``timeout`` seconds instead of blocking forever.
+    """
 
     def __init__(self, session: zenoh.Session, run_id: str, body: str, controller: str, timeout: float) -> None:
         self.session = session
         self.timeout = timeout
         self.reset_key = bus.key(run_id, controller, ControllerReset.TAG)
-        self.commands: queue.SimpleQueue = queue.SimpleQueue()
+        self.command_key = bus.key(run_id, body, MotorCommand.TAG)
         self.publisher = session.declare_publisher(bus.key(run_id, controller, SensorFrame.TAG))
-        self.subscriber = session.declare_subscriber(
-            bus.key(run_id, body, MotorCommand.TAG), zenoh.handlers.Callback(self._on_command, indirect=False)
-        )
+        self.subscriber = session.declare_subscriber(self.command_key, zenoh.handlers.RingChannel(64))
+        self._waiting_since: float | None = None
+        self._expired = False
+        self._closed = threading.Event()
+        self._watchdog = threading.Thread(target=self._watch, name="buslink-watchdog", daemon=True)
+        self._watchdog.start()
 
-    def _on_command(self, sample: zenoh.Sample) -> None:
-        self.commands.put(sample.payload.to_bytes())
+    def _watch(self) -> None:
+        period = min(max(self.timeout / 4, 0.01), 1.0)
+        while not self._closed.wait(period):
+            since = self._waiting_since
+            if since is not None and time.monotonic() - since > self.timeout and not self._expired:
+                self._expired = True
+                self.session.put(self.command_key, b"")  # wakes the body's recv()
 
     def reset(self, msg: ControllerReset) -> None:
-        while not self.commands.empty():
-            self.commands.get_nowait()
+        while self.subscriber.try_recv() is not None:  # drop stale commands and wake-ups
+            pass
         request(self.session, self.reset_key, msg, self.timeout)
 
     def step(self, frame: SensorFrame) -> MotorCommand:
+        self._expired = False
+        self._waiting_since = time.monotonic()
         self.publisher.put(encode(frame))
-        deadline = time.monotonic() + self.timeout
-        while True:
-            remaining = deadline - time.monotonic()
-            try:
-                data = self.commands.get(timeout=max(remaining, 0.0))
-            except queue.Empty:
-                raise LinkError(f"interrupted: no command for tick {frame.tick} within {self.timeout:g} s") from None
-            try:
-                command = decode(data)
-            except MessageError as exc:
-                log.warning("dropped malformed command: %s", exc)
-                continue
-            if not isinstance(command, MotorCommand) or command.trial_id != frame.trial_id or command.tick != frame.tick:
-                log.warning("dropped unexpected message %s", getattr(command, "TAG", command))
-                continue
-            return command
+        try:
+            while True:
+                data = self.subscriber.recv().payload.to_bytes()
+                if self._expired:
+                    raise LinkError(f"interrupted: no command for tick {frame.tick} within {self.timeout:g} s")
+                if not data:
+                    continue  # a late wake-up from an earlier tick
+                try:
+                    command = decode(data)
+                except MessageError as exc:
+                    log.warning("dropped malformed command: %s", exc)
+                    continue
+                if (not isinstance(command, MotorCommand) or command.trial_id != frame.trial_id
+                        or command.tick != frame.tick):
+                    log.warning("dropped unexpected message %s", getattr(command, "TAG", command))
+                    continue
+                return command
+        finally:
+            self._waiting_since = None
 
     def close(self) -> None:
+        self._closed.set()
         self.subscriber.undeclare()
         self.publisher.undeclare()
 
@@ -125,6 +147,8 @@ class Host:
         self.instance = spec["instance"]
         self.inbox: queue.SimpleQueue = queue.SimpleQueue()
         self._publishers: dict[str, Any] = {}
+        self._lock = threading.Lock()  # the module sees one message at a time
+        self._stopping = False
 
     # callbacks only enqueue; the main loop does the work
     def _enqueue(self, item) -> None:
@@ -138,6 +162,7 @@ class Host:
         self.module = make_module(spec["reference"], spec["params"], spec["seed"], spec["spec_name"])
         self.session = bus.open_session(spec["listen"], spec["connect"])
         declared = []
+        streams: list[tuple[str, Any, threading.Thread]] = []
         link = None
         rec = None
         try:
@@ -158,16 +183,26 @@ class Host:
                     self.module.link = link
             for message_type in type(self.module).handles:
                 key_expr = bus.key(self.run_id, self.instance, message_type.TAG)
-                callback = zenoh.handlers.Callback(self._enqueue, indirect=False)
-                if message_type.STREAM:
-                    declared.append(self.session.declare_subscriber(key_expr, callback))
+                if message_type.STREAM:  # one thread blocks in recv(): no Python handoff per tick
+                    subscriber = self.session.declare_subscriber(key_expr, zenoh.handlers.RingChannel(64))
+                    thread = threading.Thread(target=self._stream_loop, args=(subscriber,), daemon=True,
+                                              name=f"stream-{message_type.TAG}")
+                    thread.start()
+                    streams.append((key_expr, subscriber, thread))
                 else:
+                    callback = zenoh.handlers.Callback(self._enqueue, indirect=False)
                     declared.append(self.session.declare_queryable(key_expr, callback))
             token = self.session.liveliness().declare_token(bus.alive_key(self.run_id, self.instance))
             log.info("%s ready (%s)", self.instance, spec["reference"])
             self._loop()
             token.undeclare()
         finally:
+            self._stopping = True
+            for key_expr, subscriber, thread in streams:
+                self.session.put(key_expr, b"")  # wakes the stream thread, which sees _stopping
+                thread.join(timeout=2.0)
+                if not thread.is_alive():
+                    subscriber.undeclare()
             for d in declared:
                 d.undeclare()
             if link is not None:
@@ -189,10 +224,8 @@ class Host:
                 continue
             if item is STOP:
                 return
-            if isinstance(item, zenoh.Query):
+            with self._lock:
                 self._answer(item)
-            else:
-                self._stream(item)
 
     def _answer(self, query: zenoh.Query) -> None:
         try:
@@ -211,21 +244,30 @@ class Host:
         finally:
             query.drop()
 
-    def _stream(self, sample: zenoh.Sample) -> None:
+    def _stream_loop(self, subscriber) -> None:
+        recv, handle = subscriber.recv, self._stream
+        while True:
+            data = recv().payload.to_bytes()
+            if self._stopping:
+                return
+            handle(data)
+
+    def _stream(self, data: bytes) -> None:
         try:
-            msg = decode(sample.payload.to_bytes())
-            reply = self.module.handle(msg)
+            msg = decode(data)
+            with self._lock:
+                reply = self.module.handle(msg)
         except MessageError as exc:
-            log.warning("%s: dropped malformed message on %s: %s", self.instance, sample.key_expr, exc)
+            log.warning("%s: dropped malformed stream message: %s", self.instance, exc)
             return
         except Exception:
-            log.exception("%s: error handling %s", self.instance, sample.key_expr)
+            log.exception("%s: error handling a stream message", self.instance)
             return
         if reply is not None:
-            key_expr = self._reply_key(reply.TAG)
-            publisher = self._publishers.get(key_expr)
+            publisher = self._publishers.get(reply.TAG)
             if publisher is None:
-                publisher = self._publishers[key_expr] = self.session.declare_publisher(key_expr)
+                key_expr = self._reply_key(reply.TAG)
+                publisher = self._publishers[reply.TAG] = self.session.declare_publisher(key_expr)
             publisher.put(encode(reply))
 
 

@@ -3,7 +3,8 @@
 Every message is a frozen, keyword-only dataclass registered under a short tag
 (``acc.evaluate``). On the wire a message is a msgpack array
 ``[SCHEMA_VERSION, tag, [field values...]]``; numpy arrays travel as a msgpack
-extension (dtype, shape, raw bytes), so a frame of sensor values costs one copy.
+extension (a small dtype/shape header, then the raw bytes), so a frame of sensor
+values costs one copy.
 
 ``decode`` raises :class:`MessageError` for anything it cannot turn back into a
 registered message of the right schema version and field types; the runtime logs
@@ -13,6 +14,7 @@ and drops such input, it never crashes on it.
 from __future__ import annotations
 
 import dataclasses
+import struct
 import types
 import typing
 from typing import Any, ClassVar
@@ -20,7 +22,8 @@ from typing import Any, ClassVar
 import msgpack
 import numpy as np
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+_unpackb = msgpack.unpackb
 _NDARRAY_EXT = 1
 
 _REGISTRY: dict[str, type[Message]] = {}
@@ -37,7 +40,7 @@ class Message:
     #: True for lockstep streams (pub/sub, reply published back); False for request/reply.
     STREAM: ClassVar[bool] = False
     _FIELDS: ClassVar[tuple[str, ...]] = ()
-    _CHECKS: ClassVar[tuple[tuple[str, Any], ...]] = ()
+    _CHECKS: ClassVar[tuple[tuple[int, str, tuple[type, ...]], ...]] = ()
 
 
 def _checker(annotation: Any):
@@ -82,7 +85,8 @@ def message(tag: str, *, stream: bool = False):
         cls.TAG = tag
         cls.STREAM = stream
         cls._FIELDS = names
-        cls._CHECKS = tuple((n, c) for n in names if (c := _checker(hints[n])) is not None)
+        cls._CHECKS = tuple((i, n, c if isinstance(c, tuple) else (c,))
+                            for i, n in enumerate(names) if (c := _checker(hints[n])) is not None)
         _REGISTRY[tag] = cls
         return cls
 
@@ -94,22 +98,50 @@ def registered() -> dict[str, type[Message]]:
     return dict(_REGISTRY)
 
 
+_HEADERS: dict[tuple[Any, tuple[int, ...]], bytes] = {}
+
+
+def _array_header(dtype: np.dtype, shape: tuple[int, ...]) -> bytes:
+    """``len(dtype.str) | dtype.str | ndim | shape as uint32...``, cached per (dtype, shape)."""
+    header = _HEADERS.get((dtype, shape))
+    if header is None:
+        code = dtype.str.encode()
+        header = bytes((len(code),)) + code + struct.pack(f"<B{len(shape)}I", len(shape), *shape)
+        if len(_HEADERS) < 1024:
+            _HEADERS[(dtype, shape)] = header
+    return header
+
+
 def _default(obj: Any) -> Any:
     if isinstance(obj, np.ndarray):
-        arr = np.ascontiguousarray(obj)
-        return msgpack.ExtType(
-            _NDARRAY_EXT, msgpack.packb([arr.dtype.str, list(arr.shape), arr.tobytes()])
-        )
+        if obj.dtype.hasobject:
+            raise TypeError("cannot encode an object array")
+        return msgpack.ExtType(_NDARRAY_EXT, _array_header(obj.dtype, obj.shape) + obj.tobytes())
     if isinstance(obj, np.generic):
         return obj.item()
     raise TypeError(f"cannot encode {type(obj).__name__}")
 
 
+_LAYOUTS: dict[bytes, tuple[np.dtype, int, tuple[int, ...]]] = {}
+
+
 def _ext_hook(code: int, data: bytes) -> Any:
     if code != _NDARRAY_EXT:
         raise MessageError(f"unknown extension type {code}")
-    dtype, shape, raw = msgpack.unpackb(data)
-    return np.frombuffer(raw, dtype=np.dtype(dtype)).reshape(shape)
+    n = data[0]
+    ndim = data[1 + n]
+    offset = 2 + n + 4 * ndim
+    header = data[:offset]
+    layout = _LAYOUTS.get(header)
+    if layout is None:
+        dtype = np.dtype(data[1 : 1 + n].decode())
+        if dtype.hasobject:
+            raise MessageError("object arrays are not accepted")
+        layout = (dtype, offset, struct.unpack_from(f"<{ndim}I", data, 2 + n))
+        if len(_LAYOUTS) < 1024:
+            _LAYOUTS[header] = layout
+    dtype, offset, shape = layout
+    return np.frombuffer(data, dtype=dtype, offset=offset).reshape(shape)
 
 
 def encode(msg: Message) -> bytes:
@@ -122,29 +154,26 @@ def encode(msg: Message) -> bytes:
 def decode(data: bytes) -> Message:
     """Turn bytes back into a message, or raise :class:`MessageError` saying why not."""
     try:
-        obj = msgpack.unpackb(data, ext_hook=_ext_hook, strict_map_key=False)
+        obj = _unpackb(data, ext_hook=_ext_hook, strict_map_key=False)
     except MessageError:
         raise
     except Exception as exc:  # msgpack raises several unrelated types on garbage
         raise MessageError(f"not msgpack: {exc}") from None
-    if not (isinstance(obj, list) and len(obj) == 3):
+    if type(obj) is not list or len(obj) != 3:
         raise MessageError("expected [schema_version, tag, fields]")
     version, tag, values = obj
     if version != SCHEMA_VERSION:
         raise MessageError(f"schema version {version!r}, this side speaks {SCHEMA_VERSION}")
-    cls = _REGISTRY.get(tag) if isinstance(tag, str) else None
+    cls = _REGISTRY.get(tag) if type(tag) is str else None
     if cls is None:
         raise MessageError(f"unknown message tag {tag!r}")
-    if not isinstance(values, list) or len(values) != len(cls._FIELDS):
+    if type(values) is not list or len(values) != len(cls._FIELDS):
         raise MessageError(f"{tag}: expected {len(cls._FIELDS)} fields {cls._FIELDS}")
-    kwargs = dict(zip(cls._FIELDS, values, strict=True))
-    for name, check in cls._CHECKS:
-        value = kwargs[name]
-        if isinstance(value, bool) and check in (int, (int, float)):
-            raise MessageError(f"{tag}.{name}: expected a number, got a bool")
-        if not isinstance(value, check):
+    for i, name, check in cls._CHECKS:
+        value = values[i]
+        if not isinstance(value, check) or (value is True or value is False) and bool not in check:
             raise MessageError(f"{tag}.{name}: expected {check}, got {type(value).__name__}")
-    return cls(**kwargs)
+    return cls(**dict(zip(cls._FIELDS, values)))
 
 
 # ---------------------------------------------------------------------------

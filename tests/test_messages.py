@@ -1,3 +1,4 @@
+import msgpack
 import numpy as np
 import pytest
 
@@ -17,7 +18,11 @@ def test_roundtrip_keeps_arrays_and_types():
     "payload, text",
     [
         (b"\xc1garbage", "not msgpack"),
-        (b"\x93\x02\xa3ack\x91\xa0", "schema version 2"),
+        (b"\x93\x09\xa3ack\x91\xa0", "schema version 9"),
+        (msgpack.packb([m.SCHEMA_VERSION, "controller.sensors", [0, 1, msgpack.ExtType(1, b"\x02|O\x00")]]),
+         "object arrays"),
+        (msgpack.packb([m.SCHEMA_VERSION, "controller.sensors", [0, 1, msgpack.ExtType(1, b"\x03<f8\x01\x09")]]),
+         "not msgpack"),
         (m.encode(m.Ack(detail="x")).replace(b"ack", b"zzz"), "unknown message tag 'zzz'"),
     ],
 )
@@ -27,8 +32,6 @@ def test_malformed_payloads_raise_message_error(payload, text):
 
 
 def test_wrong_field_type_is_rejected():
-    import msgpack
-
     bad = msgpack.packb([m.SCHEMA_VERSION, "ofc.grade", ["high"]])
     with pytest.raises(m.MessageError, match="ofc.grade.eta"):
         m.decode(bad)
