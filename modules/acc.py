@@ -75,7 +75,7 @@ class ACC(Module):
     def on_learn(self, msg: Learn) -> Learned:
         change = self.learn(np.asarray(msg.v, dtype=float), msg.success, msg.rho)
         if self.recording is not None:
-            self.log_maps()
+            self.defer(self.log_maps)  # after the reply: logging is off the learning cycle's path
         return Learned(
             change=change,
             n_success_samples=self.success_map.samples,
@@ -164,5 +164,7 @@ class ACC(Module):
                 points, strips = rr.Points2D, rr.LineStrips2D
             colour = np.where(m.active[:, None], colours[name], (150, 150, 150))
             rec.log(f"{self.entity}/{name}_map/neurons", points(w, colors=colour, radii=0.008))
-            rec.log(f"{self.entity}/{name}_map/edges", strips([e[:, :3] for e in m.edges()],
-                                                              colors=colours[name], radii=0.002))
+            seg = m.segments()[:, :, :3]
+            if seg.shape[2] == 1:
+                seg = np.concatenate([seg, np.zeros_like(seg)], axis=2)
+            rec.log(f"{self.entity}/{name}_map/edges", strips(seg, colors=colours[name], radii=0.002))

@@ -25,9 +25,9 @@ class SOMParams(ModuleParams):
                                  "(default: half the longest grid side)")
     radius_min: float = Field(0.5, gt=0, description="floor of sigma, grid units")
     decay: float = Field(100.0, gt=0, description="samples for epsilon and sigma to fall by 1/e")
-    neighbourhood: Literal["thesis", "gaussian"] = Field(
-        "thesis", description="'thesis': exp(-|r-s| / 2 sigma^2) as printed in (2.11); "
-        "'gaussian': exp(-|r-s|^2 / 2 sigma^2)")
+    neighbourhood: Literal["gaussian", "thesis"] = Field(
+        "gaussian", description="'gaussian': exp(-|r-s|^2 / 2 sigma^2); 'thesis': exp(-|r-s| / 2 sigma^2) "
+        "as printed in (2.11), so wide that a map stays contracted for hundreds of samples")
 
 
 class SelfOrganisingMap:
@@ -101,3 +101,12 @@ class SelfOrganisingMap:
             moved = np.moveaxis(w, axis, -2).reshape(-1, self.shape[axis], self.dim)
             lines.extend(moved)
         return lines
+
+    def segments(self) -> np.ndarray:
+        """Every grid edge as a segment, shape (edges, 2, dim): the mesh in one array (fast to log)."""
+        w = self.weights.reshape(*self.shape, self.dim)
+        parts = []
+        for axis in range(len(self.shape)):
+            moved = np.moveaxis(w, axis, 0)
+            parts.append(np.stack([moved[:-1], moved[1:]], axis=-2).reshape(-1, 2, self.dim))
+        return np.concatenate(parts)

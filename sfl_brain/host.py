@@ -226,6 +226,10 @@ class Host:
                 return
             with self._lock:
                 self._answer(item)
+                try:
+                    self.module.run_deferred()
+                except Exception:
+                    log.exception("%s: deferred work failed", self.instance)
 
     def _answer(self, query: zenoh.Query) -> None:
         try:

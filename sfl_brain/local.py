@@ -46,9 +46,13 @@ class LocalSupervisor:
         self._next = 0
 
     def _deliver(self, target: str, message: Message) -> Message:
+        module = self.modules[target]
         if self.through_codec:
-            return decode(encode(self.modules[target].handle(decode(encode(message)))))
-        return self.modules[target].handle(message)
+            reply = decode(encode(module.handle(decode(encode(message)))))
+        else:
+            reply = module.handle(message)
+        module.run_deferred()
+        return reply
 
     def call(self, target: str, message: Message, timeout: float | None = None) -> Message:
         return self._deliver(target, message)

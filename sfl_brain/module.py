@@ -73,14 +73,30 @@ class Module:
         self.recording = None
         #: the entity path prefix this module logs under (its instance name)
         self.entity = type(self).__name__.lower()
+        self._deferred: list[Callable[[], None]] = []
         self.reset(seed)
 
     def reset(self, seed: int) -> None:
         """Return to the initial state; everything random draws from ``seed``."""
         self.rng = np.random.default_rng(seed)
 
+    def defer(self, work: Callable[[], None]) -> None:
+        """Run ``work`` after the reply has left (e.g. logging), off the caller's critical path.
+
+        The host runs deferred work right after it replies; anything still pending runs before
+        the next message is handled, so deferred work never reorders with handlers.
+        """
+        self._deferred.append(work)
+
+    def run_deferred(self) -> None:
+        pending, self._deferred = self._deferred, []
+        for work in pending:
+            work()
+
     def handle(self, msg: Message) -> Message | None:
         """Dispatch a message to its handler by type."""
+        if self._deferred:
+            self.run_deferred()
         name = self.handles.get(type(msg))
         if name is None:
             raise TypeError(f"{type(self).__name__} does not handle {msg.TAG!r}")

@@ -58,6 +58,21 @@ class Conductor:
     def call(self, message: m.Message) -> m.Message:
         return self.sup.call(self.providers[message.TAG], message)
 
+    def call_all(self, *messages: m.Message) -> list[m.Message]:
+        """Send independent requests at once (to different modules) and wait for every reply."""
+        timeout = self.plan.scenario.timeouts.request
+        tokens = [self.sup.submit(self.providers[msg.TAG], msg, timeout) for msg in messages]
+        results: dict[int, object] = {}
+        while len(results) < len(tokens):
+            results.update(self.sup.wait_any([t for t in tokens if t not in results]))
+        replies = []
+        for token, msg in zip(tokens, messages, strict=True):
+            result = results[token]
+            if isinstance(result, Exception):
+                raise RunError(str(result)) from None
+            replies.append(result)
+        return replies
+
     def trials(self, requests: Iterable[m.TrialRequest]) -> Iterator[tuple[m.TrialRequest, m.TrialResult, float]]:
         """Run trials on the body workers, each worker busy with one at a time.
 
@@ -121,16 +136,25 @@ def run_learn(c: Conductor) -> dict:
     decision = 0
     consecutive_nogo = 0
     stop_reason = "trial budget spent"
+    # Candidates are drawn one stream, in order, whatever the batch: a batch is only how many of
+    # the next draws ACC evaluates in one request. Draws left over after a go are evaluated again
+    # (against the maps after learning) in the next request, so records do not depend on batch.
+    pool = np.empty((0, dim))
+    batch = min(8, proto.batch)
+    go_window: deque[int] = deque(maxlen=20)  # decisions per go, recent trials: sizes the next batch
     while progress.trials < proto.trials:
         if decision >= proto.max_decisions:
             stop_reason = f"max_decisions ({proto.max_decisions}) reached"
             break
-        candidates = rng.random((proto.batch, dim))
+        if len(pool) < batch:
+            pool = np.concatenate([pool, rng.random((batch - len(pool), dim))])
+        candidates = pool[:batch]
         evaluation: m.Evaluation = c.call(m.Evaluate(candidates=candidates, s_vig=threshold.s_vig))
         rows = []
         chosen = None
         rejected_update = None
-        for i in range(proto.batch):
+        used = 0
+        for i in range(batch):
             go = bool(evaluation.go[i])
             row = {"kind": "decision", "decision": decision, "trial": progress.trials if go else None,
                    "go": go, "s_vig": threshold.s_vig, "d_success": float(evaluation.d_success[i]),
@@ -138,6 +162,7 @@ def run_learn(c: Conductor) -> dict:
                    **c.physical_row(candidates[i])}
             rows.append(row)
             decision += 1
+            used = i + 1
             if go:
                 chosen = i
                 consecutive_nogo = 0
@@ -145,13 +170,18 @@ def run_learn(c: Conductor) -> dict:
             consecutive_nogo += 1
             if consecutive_nogo % 1000 == 0:
                 rejected_update = consecutive_nogo
-                break  # the threshold may change: draw a new batch
+                break  # the threshold may change: evaluate the next draws against the new one
             if decision >= proto.max_decisions:
                 break
+        pool = pool[used:]
         if c.plan.scenario.record.decisions:
             c.writer.write_many(rows)
         c.rr.decisions(rows)
         progress.decisions = decision
+        if chosen is not None:
+            go_window.append(decision - (progress.last.get("decision", -1) + 1))
+        per_go = max(go_window) if go_window else used
+        batch = int(min(proto.batch, max(4, 2 * per_go if chosen is not None else 2 * batch)))
         if rejected_update is not None:
             threshold = c.call(m.Rejected(consecutive=rejected_update))
             continue
@@ -167,11 +197,12 @@ def run_learn(c: Conductor) -> dict:
             n_success += 1
         else:
             n_failure += 1
-        learned: m.Learned = c.call(m.Learn(v=v, success=result.success, rho=rho if rho is not None else 1.0))
         s_vig_used = threshold.s_vig
         low, high = threshold.low, threshold.high
-        threshold = c.call(m.TrialDone(trial_index=trial_id + 1, success=result.success,
-                                       n_success=n_success, n_failure=n_failure))
+        learned, threshold = c.call_all(  # ACC and vigilance learn from the trial in parallel
+            m.Learn(v=v, success=result.success, rho=rho if rho is not None else 1.0),
+            m.TrialDone(trial_index=trial_id + 1, success=result.success, n_success=n_success,
+                        n_failure=n_failure))
         progress.trials += 1
         progress.successes = n_success
         progress.s_vig = threshold.s_vig

@@ -12,6 +12,8 @@ Entity paths (every process logs into the same recording id):
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
@@ -49,45 +51,80 @@ class RerunLog:
             self.rec.save(rrd)
         self.rec.send_blueprint(blueprint())
         self.axes = axes
+        self._decisions: list[dict] = []
+        self._trials: list[dict] = []
+        self._flushed = time.monotonic()
         self.rec.log("omega", rr.TextDocument("Parameter space axes (unit square): " + ", ".join(axes)), static=True)
 
+    #: rows are buffered and sent as columns (one call per series) at most this often, and at close
+    FLUSH_ROWS = 64
+    FLUSH_SECONDS = 0.5
+
     def decisions(self, rows: list[dict]) -> None:
-        if not rows:
-            return
-        index = [rr.TimeColumn("decision", sequence=np.array([r["decision"] for r in rows]))]
-        margin = np.array([r["d_failure"] - r["d_success"] for r in rows])
-        self.rec.send_columns("decisions/margin", index, rr.Scalars.columns(scalars=margin))
-        self.rec.send_columns("decisions/s_vig", index,
-                              rr.Scalars.columns(scalars=np.array([r["s_vig"] for r in rows])))
-        self.rec.send_columns("decisions/go", index,
-                              rr.Scalars.columns(scalars=np.array([float(r["go"]) for r in rows])))
+        self._decisions.extend(rows)
+        self._maybe_flush()
 
     def trial(self, row: dict) -> None:
-        rec = self.rec
-        rec.set_time("trial", sequence=int(row["trial"]))
-        if row.get("decision") is not None:
-            rec.set_time("decision", sequence=int(row["decision"]))
-        rec.log("trials/success", rr.Scalars(float(row["success"])))
-        rec.log("trials/success_rate", rr.Scalars(float(row["success_rate"])))
-        if row.get("quality") is not None:
-            rec.log("trials/quality", rr.Scalars(float(row["quality"])))
-        if row.get("rho") is not None:
-            rec.log("trials/rho", rr.Scalars(float(row["rho"])))
-        if row.get("ns_nf") is not None:
-            rec.log("trials/ns_nf", rr.Scalars(float(row["ns_nf"])))
-        if row.get("s_vig") is not None:
-            rec.log("vigilance/s_vig", rr.Scalars(float(row["s_vig"])))
-            rec.log("vigilance/band_low", rr.Scalars(float(row["band_low"])))
-            rec.log("vigilance/band_high", rr.Scalars(float(row["band_high"])))
-        unit = row.get("v_unit")
-        if unit is not None and len(unit) >= 2:
-            rec.log("omega/trials", rr.Points2D([unit[:2]], colors=[SUCCESS if row["success"] else FAILURE],
-                                                radii=0.006))
-        rec.log("trials/log", rr.TextLog(
-            f"trial {row['trial']}: {'success' if row['success'] else 'failure'}"
-            + (f", eta {row['quality']:.4g}" if row.get("quality") is not None else "")
-            + (f", rho {row['rho']:.3g}" if row.get("rho") is not None else "")))
+        self._trials.append(row)
+        self._maybe_flush()
+
+    def _maybe_flush(self) -> None:
+        if (len(self._decisions) >= self.FLUSH_ROWS or len(self._trials) >= self.FLUSH_ROWS
+                or time.monotonic() - self._flushed > self.FLUSH_SECONDS):
+            self.flush()
+
+    def flush(self) -> None:
+        self._flushed = time.monotonic()
+        rows, self._decisions = self._decisions, []
+        if rows:
+            self._send_decisions(rows)
+        rows, self._trials = self._trials, []
+        if rows:
+            self._send_trials(rows)
+
+    def _send_decisions(self, rows: list[dict]) -> None:
+        index = [rr.TimeColumn("decision", sequence=np.array([r["decision"] for r in rows]))]
+        columns = {
+            "decisions/margin": [r["d_failure"] - r["d_success"] for r in rows],
+            "decisions/s_vig": [r["s_vig"] for r in rows],
+            "decisions/go": [float(r["go"]) for r in rows],
+        }
+        for path, values in columns.items():
+            self.rec.send_columns(path, index, rr.Scalars.columns(scalars=np.array(values, dtype=float)))
+
+    def _series(self, path: str, rows: list[dict], key: str) -> None:
+        """One scalar series on the trial (and decision) timelines, rows where ``key`` has a value."""
+        kept = [r for r in rows if r.get(key) is not None]
+        if not kept:
+            return
+        self.rec.send_columns(path, self._index(kept),
+                              rr.Scalars.columns(scalars=np.array([float(r[key]) for r in kept])))
+
+    @staticmethod
+    def _index(rows: list[dict]) -> list:
+        index = [rr.TimeColumn("trial", sequence=np.array([int(r["trial"]) for r in rows]))]
+        if all(r.get("decision") is not None for r in rows):
+            index.append(rr.TimeColumn("decision", sequence=np.array([int(r["decision"]) for r in rows])))
+        return index
+
+    def _send_trials(self, rows: list[dict]) -> None:
+        for path, key in (("trials/success", "success"), ("trials/success_rate", "success_rate"),
+                          ("trials/quality", "quality"), ("trials/rho", "rho"), ("trials/ns_nf", "ns_nf"),
+                          ("vigilance/s_vig", "s_vig"), ("vigilance/band_low", "band_low"),
+                          ("vigilance/band_high", "band_high")):
+            self._series(path, rows, key)
+        placed = [r for r in rows if r.get("v_unit") is not None and len(r["v_unit"]) >= 2]
+        if placed:
+            self.rec.send_columns("omega/trials", self._index(placed), rr.Points2D.columns(
+                positions=np.array([r["v_unit"][:2] for r in placed], dtype=float),
+                colors=np.array([SUCCESS if r["success"] else FAILURE for r in placed], dtype=np.uint8),
+                radii=np.full(len(placed), 0.006, dtype=np.float32)))
+        self.rec.send_columns("trials/log", self._index(rows), rr.TextLog.columns(text=[
+            f"trial {r['trial']}: {'success' if r['success'] else 'failure'}"
+            + (f", eta {r['quality']:.4g}" if r.get("quality") is not None else "")
+            + (f", rho {r['rho']:.3g}" if r.get("rho") is not None else "") for r in rows]))
 
     def close(self) -> None:
+        self.flush()
         self.rec.flush()
         self.rec.disconnect()

@@ -35,14 +35,15 @@ def test_quantisation_error_falls_and_changes_converge():
     assert np.mean(changes[-50:]) < np.mean(changes[:50]) / 10  # convergence (§3.3.3)
 
 
-def test_update_follows_equations_2_10_2_11_and_5_1():
-    s = som(0, shape=(3, 3), learning_rate=0.4, radius=1.0, decay=1e9)
+@pytest.mark.parametrize("neighbourhood, power", [("gaussian", 2), ("thesis", 1)])
+def test_update_follows_equations_2_10_2_11_and_5_1(neighbourhood, power):
+    s = som(0, shape=(3, 3), learning_rate=0.4, radius=1.5, decay=1e9, neighbourhood=neighbourhood)
     w0 = s.weights.copy()
     v = np.array([0.5, 0.5])
     winner = s.winner(v)
     s.update(v, rho=2.0)
     grid_distance = np.linalg.norm(s.grid - s.grid[winner], axis=1)
-    h = np.exp(-grid_distance / (2 * 1.0**2))  # (2.11) as printed
+    h = np.exp(-grid_distance**power / (2 * 1.5**2))  # (2.11): Gaussian, or as printed (no square)
     np.testing.assert_allclose(s.weights, w0 + 0.4 * 2.0 * h[:, None] * (v - w0))
     assert s.wins[winner] == 1 and s.samples == 1
     assert s.learning_rate() == pytest.approx(0.4)

@@ -177,3 +177,20 @@ def test_sweep_fans_out_over_workers(tmp_path):
     trials = [r for r in read_records(out) if r["kind"] == "trial"]
     assert sorted(r["trial"] for r in trials) == list(range(121))
     assert {r["worker"] for r in trials} == {"body.0", "body.1"}
+
+
+def test_buslink_times_out_when_no_controller_answers():
+    """A body blocked in recv() on a silent controller is woken by the watchdog: the trial is interrupted."""
+    import numpy as np
+
+    from sfl_brain.host import BusLink, LinkError
+    from sfl_brain.messages import SensorFrame
+
+    session = bus.open_session([bus.free_endpoint()], [])
+    link = BusLink(session, "lonely", "body", "controller", timeout=0.3)
+    try:
+        with pytest.raises(LinkError, match="no command for tick 0 within 0.3 s"):
+            link.step(SensorFrame(trial_id=0, tick=0, values=np.zeros(3)))
+    finally:
+        link.close()
+        session.close()
