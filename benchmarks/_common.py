@@ -16,8 +16,11 @@ def stats(samples_s) -> str:
 
 
 def spawn_host(spec: dict) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "sfl_brain.host", json.dumps(spec)], stdin=subprocess.PIPE,
-                            stderr=subprocess.DEVNULL)
+    return subprocess.Popen(
+        [sys.executable, "-m", "sfl_brain.host", json.dumps(spec)],
+        stdin=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+    )
 
 
 def wait_alive(session, key: str, timeout: float = 30.0) -> None:
@@ -30,6 +33,17 @@ def wait_alive(session, key: str, timeout: float = 30.0) -> None:
 
 def controller_spec(run_id: str, reference: str, endpoint: str) -> dict:
     """Host spec of a controller process that answers a body named ``body`` on ``endpoint``."""
-    return {"run_id": run_id, "instance": "controller", "spec_name": "controller", "reference": reference,
-            "params": {}, "seed": 0, "routes": {"body.command": "body"}, "listen": ["tcp/127.0.0.1:0"],
-            "connect": [endpoint], "rrd": None, "viewer": None, "tick_timeout": 10.0}
+    return {
+        "run_id": run_id,
+        "instance": "controller",
+        "spec_name": "controller",
+        "reference": reference,
+        "params": {},
+        "seed": 0,
+        "routes": {"body.command": "body"},
+        "listen": ["tcp/127.0.0.1:0"],
+        "connect": [endpoint],
+        "rrd": None,
+        "viewer": None,
+        "tick_timeout": 10.0,
+    }

@@ -42,7 +42,7 @@ def main() -> None:
         with tempfile.TemporaryDirectory() as tmp:
             ready = {}
             t0 = time.perf_counter()
-            run(plan, Path(tmp) / "run", on_ready=lambda sup, s: ready.setdefault("t", time.perf_counter()))
+            run(plan, Path(tmp) / "run", on_ready=lambda sup, s, r=ready: r.setdefault("t", time.perf_counter()))
             per_trial_proc.append((time.perf_counter() - ready["t"]) / trials)
     per_trial_local = []
     for _ in range(3):
@@ -51,8 +51,10 @@ def main() -> None:
         per_trial_local.append((time.perf_counter() - t0) / trials)
     p, l = np.median(per_trial_proc), np.median(per_trial_local)
     print(f"learning cycle, analytic body, {trials} trials (s_vig -0.1), median of 3:")
-    print(f"  modules as processes over Zenoh: {p * 1e3:.2f} ms/trial ({1 / p:,.0f} trials/s; includes Rerun and"
-          " records; goal <= 2 ms)")
+    print(
+        f"  modules as processes over Zenoh: {p * 1e3:.2f} ms/trial ({1 / p:,.0f} trials/s; includes Rerun and"
+        " records; goal <= 2 ms)"
+    )
     print(f"  same protocol in one process:    {l * 1e3:.2f} ms/trial ({1 / l:,.0f} trials/s)")
     print(f"  ratio processes / one process:   {p / l:.2f}; the bus adds {(p - l) * 1e3:.2f} ms per trial")
 

@@ -133,8 +133,12 @@ def startup(repeats=3):
         first = {}
         t0 = time.perf_counter()
         with tempfile.TemporaryDirectory() as tmp:
-            run(plan, Path(tmp) / "run", on_ready=lambda sup, s: first.setdefault("ready", s),
-                on_progress=lambda p: first.setdefault("trial", time.perf_counter() - t0))
+            run(
+                plan,
+                Path(tmp) / "run",
+                on_ready=lambda sup, s, f=first: f.setdefault("ready", s),
+                on_progress=lambda p, f=first, t0=t0: f.setdefault("trial", time.perf_counter() - t0),
+            )
         ready.append((first["ready"], first["trial"]))
     return np.array(ready)
 
@@ -168,8 +172,10 @@ def main() -> None:
     added = (np.median(framework_t) - np.median(raw_t)) * 1e6
     print(f"  framework / raw (medians): {ratio:.2f}  (goal <= 1.20); the framework adds {added:.1f} us per tick")
     s = startup()
-    print(f"sfl run start-up, 5 module processes: ready {np.median(s[:, 0]):.2f} s, first trial done "
-          f"{np.median(s[:, 1]):.2f} s (median of {len(s)}; goal <= 2 s)")
+    print(
+        f"sfl run start-up, 5 module processes: ready {np.median(s[:, 0]):.2f} s, first trial done "
+        f"{np.median(s[:, 1]):.2f} s (median of {len(s)}; goal <= 2 s)"
+    )
 
 
 if __name__ == "__main__":

@@ -29,8 +29,13 @@ from sfl_brain.host import BusLink  # noqa: E402
 from sfl_brain.messages import TrialRequest  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-REQUEST = TrialRequest(trial_id=0, seed=0, body_params={"slope_deg": 0.0},
-                       controller_params={"alpha_hip": 10.0, "theta_hip_max_deg": 110.0}, log=False)
+REQUEST = TrialRequest(
+    trial_id=0,
+    seed=0,
+    body_params={"slope_deg": 0.0},
+    controller_params={"alpha_hip": 10.0, "theta_hip_max_deg": 110.0},
+    log=False,
+)
 
 
 def physics_only() -> float:
@@ -76,9 +81,16 @@ def sweep(workers: int, grid: int, colocate: bool) -> float:
     from sfl_brain.run import run
     from sfl_brain.scenario import load
 
-    plan = load(ROOT / "scenarios" / "e3_1_viability.yaml",
-                [f"modules.body.workers={workers}", f"space.0.steps={grid}", f"space.1.steps={grid}",
-                 "record.body_every=0", f"modules.controller.colocate={str(colocate).lower()}"])
+    plan = load(
+        ROOT / "scenarios" / "e3_1_viability.yaml",
+        [
+            f"modules.body.workers={workers}",
+            f"space.0.steps={grid}",
+            f"space.1.steps={grid}",
+            "record.body_every=0",
+            f"modules.controller.colocate={str(colocate).lower()}",
+        ],
+    )
     with tempfile.TemporaryDirectory() as tmp:
         t = time.perf_counter()
         _, summary = run(plan, Path(tmp) / "run")
@@ -107,8 +119,10 @@ def main() -> None:
     print(f"  500 walking trials at (c): <= {500 * c:.0f} s (goal: E3.2 under 240 s; falls end trials early)")
     n = args.grid**2
     print(f"sweep of {n} grid points (E3.1 subset), whole sfl run including start-up:")
-    for colocate, label in ((True, "controller inside each body worker (colocate: true)"),
-                            (False, "controller as its own process per worker")):
+    for colocate, label in (
+        (True, "controller inside each body worker (colocate: true)"),
+        (False, "controller as its own process per worker"),
+    ):
         one = sweep(1, args.grid, colocate)
         two = sweep(2, args.grid, colocate)
         print(f"  {label}: 1 worker {one:.1f} s, 2 workers {two:.1f} s, speed-up {one / two:.2f}x (goal >= 1.7x)")

@@ -27,8 +27,9 @@ AXES = ("x", "y", "z")
 class AnalyticParams(BodyParams):
     centre: tuple[float, ...] = Field((0.5, 0.5), min_length=1, max_length=3)
     radius: float = Field(0.3, gt=0, le=2)
-    peak: tuple[float, ...] = Field((0.6, 0.6), min_length=1, max_length=3,
-                                    description="where the quality eta is highest")
+    peak: tuple[float, ...] = Field(
+        (0.6, 0.6), min_length=1, max_length=3, description="where the quality eta is highest"
+    )
     width: float = Field(0.15, gt=0, description="spread of the quality bump")
     crash_at_trial: int = Field(-1, description="fault injection: exit abruptly on this trial id once")
     crash_marker: str | None = Field(None, description="file that records the injected crash happened")

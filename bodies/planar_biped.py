@@ -86,14 +86,21 @@ class PlanarBiped(Body):
         self.trunk = self._box(M_TRUNK, TRUNK_W, TRUNK_H, hip + (0, TRUNK_UP))
         # stance (left) leg slightly forward of vertical, swing (right) leg behind, knee flexed
         self.legs = []
-        for hip_angle, knee_angle in ((math.radians(8), math.radians(-2)), (math.radians(-18), math.radians(-35))):
+        for hip_angle, knee_angle in (
+            (math.radians(8), math.radians(-2)),
+            (math.radians(-18), math.radians(-35)),
+        ):
             self.legs.append(self._leg(hip, hip_angle, knee_angle))
         boom = pymunk.DampedRotarySpring(self.trunk, space.static_body, 0.0, p.trunk_stiffness, p.trunk_damping)
         space.add(boom)
         for b in space.bodies:
             b.velocity = (p.initial_speed, 0.0)
-        self.joints = [(self.trunk, self.legs[0][0]), (self.trunk, self.legs[1][0]),
-                       (self.legs[0][0], self.legs[0][1]), (self.legs[1][0], self.legs[1][1])]
+        self.joints = [
+            (self.trunk, self.legs[0][0]),
+            (self.trunk, self.legs[1][0]),
+            (self.legs[0][0], self.legs[0][1]),
+            (self.legs[1][0], self.legs[1][1]),
+        ]
         self.t = 0.0
         self.x_start = self.trunk.position.x
         self.energy = 0.0
@@ -206,12 +213,18 @@ class PlanarBiped(Body):
         trunk = self.trunk
         (tl, sl), (tr, sr) = self.legs
         half_pi = math.pi / 2
-        return np.array([
-            half_pi + tl.angle - trunk.angle, half_pi + tr.angle - trunk.angle,
-            sl.angle - tl.angle, sr.angle - tr.angle,
-            self.contact[0], self.contact[1],
-            self.ground_slope(trunk.position.x), trunk.angle,
-        ])
+        return np.array(
+            [
+                half_pi + tl.angle - trunk.angle,
+                half_pi + tr.angle - trunk.angle,
+                sl.angle - tl.angle,
+                sr.angle - tr.angle,
+                self.contact[0],
+                self.contact[1],
+                self.ground_slope(trunk.position.x),
+                trunk.angle,
+            ]
+        )
 
     # ------------------------------------------------------------------ acting
     def actuate(self, command: np.ndarray) -> None:
@@ -250,16 +263,28 @@ class PlanarBiped(Body):
         mass = M_TRUNK + 2 * (M_THIGH + M_SHANK)
         # walking efficiency (5.7)-(5.8): kinetic energy at the average speed over the energy spent
         quality = 0.5 * mass * velocity**2 / self.energy if success and self.energy > 0 else 0.0
-        metrics = {"distance": distance, "velocity": velocity, "steps": self.steps, "time": self.t,
-                   "energy": self.energy, "fell": self.fell}
+        metrics = {
+            "distance": distance,
+            "velocity": velocity,
+            "steps": self.steps,
+            "time": self.t,
+            "energy": self.energy,
+            "fell": self.fell,
+        }
         return success, quality, metrics
 
     # ------------------------------------------------------------------ recording
     def _record_frame(self, voltage: np.ndarray) -> None:
         (tl, sl), (tr, sr) = self.legs
         hip = self.trunk.local_to_world((0, -TRUNK_UP))
-        pts = [self.trunk.position, hip, tl.local_to_world((0, -THIGH / 2)), self._foot(0),
-               tr.local_to_world((0, -THIGH / 2)), self._foot(1)]
+        pts = [
+            self.trunk.position,
+            hip,
+            tl.local_to_world((0, -THIGH / 2)),
+            self._foot(0),
+            tr.local_to_world((0, -THIGH / 2)),
+            self._foot(1),
+        ]
         self._frames.append(np.array([[q.x, q.y] for q in pts]))
         self._trace.append(np.concatenate([self.sense(), voltage]))
 
@@ -274,7 +299,10 @@ class PlanarBiped(Body):
         trace = np.stack(self._trace)
         n = len(frames)
         times = trial_id * self.params.duration + self.params.control_dt * np.arange(1, n + 1)
-        idx = [rr.TimeColumn("sim_time", duration=times), rr.TimeColumn("trial", sequence=np.full(n, trial_id))]
+        idx = [
+            rr.TimeColumn("sim_time", duration=times),
+            rr.TimeColumn("trial", sequence=np.full(n, trial_id)),
+        ]
         for j, name in enumerate(SENSORS[:4]):
             rec.send_columns(f"{self.entity}/joints/{name}", idx, rr.Scalars.columns(scalars=np.degrees(trace[:, j])))
         for j, name in enumerate(COMMANDS):  # motor voltages (3.6): the motor neurons' net output
@@ -286,15 +314,25 @@ class PlanarBiped(Body):
             f = frames[k]
             rec.set_time("sim_time", duration=float(times[k]))
             rec.set_time("trial", sequence=trial_id)
-            rec.log(f"{self.entity}/walker", rr.LineStrips2D(
-                [[f[0], f[1]], [f[1], f[2], f[3]], [f[1], f[4], f[5]]],
-                colors=[(90, 90, 90), (40, 110, 220), (230, 140, 30)], radii=0.006))
+            rec.log(
+                f"{self.entity}/walker",
+                rr.LineStrips2D(
+                    [[f[0], f[1]], [f[1], f[2], f[3]], [f[1], f[4], f[5]]],
+                    colors=[(90, 90, 90), (40, 110, 220), (230, 140, 30)],
+                    radii=0.006,
+                ),
+            )
         x0 = float(frames[0, 1, 0]) - 0.5
         x1 = float(frames[-1, 1, 0]) + 0.5
         gx = np.linspace(x0, x1, 60)
-        rec.log(f"{self.entity}/ground", rr.LineStrips2D([np.column_stack([gx, np.interp(gx, self.ground_x,
-                                                                                          self.ground_y)])],
-                                                          colors=(120, 100, 80), radii=0.004))
+        rec.log(
+            f"{self.entity}/ground",
+            rr.LineStrips2D(
+                [np.column_stack([gx, np.interp(gx, self.ground_x, self.ground_y)])],
+                colors=(120, 100, 80),
+                radii=0.004,
+            ),
+        )
 
     def close(self) -> None:
         self.space = None

@@ -29,8 +29,12 @@ from .som import SelfOrganisingMap, SOMParams
 
 
 class ACCParams(SOMParams):
-    dim: int | None = Field(None, ge=1, le=8, description="dimension of the parameter space "
-                            "(default: the scenario's number of axes)")
+    dim: int | None = Field(
+        None,
+        ge=1,
+        le=8,
+        description="dimension of the parameter space (default: the scenario's number of axes)",
+    )
     restore: str | None = Field(None, description="a checkpoint (.npz) to start from")
 
 
@@ -118,8 +122,7 @@ class ACC(Module):
     def checkpoint(self, path: str | Path) -> None:
         np.savez(
             path,
-            **{f"{name}_{key}": getattr(m, key) for name, m in self._maps() for key in
-               ("weights", "wins", "active")},
+            **{f"{name}_{key}": getattr(m, key) for name, m in self._maps() for key in ("weights", "wins", "active")},
             success_samples=self.success_map.samples,
             failure_samples=self.failure_map.samples,
         )
@@ -128,8 +131,9 @@ class ACC(Module):
         with np.load(path) as data:
             for name, m in self._maps():
                 if data[f"{name}_weights"].shape != m.weights.shape:
-                    raise ValueError(f"{path}: {name} map has shape {data[f'{name}_weights'].shape}, "
-                                     f"this ACC has {m.weights.shape}")
+                    raise ValueError(
+                        f"{path}: {name} map has shape {data[f'{name}_weights'].shape}, this ACC has {m.weights.shape}"
+                    )
                 m.weights = data[f"{name}_weights"].copy()
                 m.wins = data[f"{name}_wins"].copy()
                 m.active = data[f"{name}_active"].copy()

@@ -18,16 +18,21 @@ from sfl_brain.module import ModuleParams
 class SOMParams(ModuleParams):
     """Shape and schedule of a self-organising map."""
 
-    shape: tuple[Annotated[int, Field(ge=1, le=1000)], ...] = Field((10, 10), min_length=1, max_length=4, description="neuron grid")
+    shape: tuple[Annotated[int, Field(ge=1, le=1000)], ...] = Field(
+        (10, 10), min_length=1, max_length=4, description="neuron grid"
+    )
     learning_rate: float = Field(0.4, gt=0, le=1, description="epsilon at the first sample (2.10)")
     learning_rate_min: float = Field(0.02, ge=0, le=1, description="floor of epsilon")
-    radius: float | None = Field(None, gt=0, description="sigma at the first sample, grid units "
-                                 "(default: half the longest grid side)")
+    radius: float | None = Field(
+        None, gt=0, description="sigma at the first sample, grid units (default: half the longest grid side)"
+    )
     radius_min: float = Field(0.5, gt=0, description="floor of sigma, grid units")
     decay: float = Field(100.0, gt=0, description="samples for epsilon and sigma to fall by 1/e")
     neighbourhood: Literal["gaussian", "thesis"] = Field(
-        "gaussian", description="'gaussian': exp(-|r-s|^2 / 2 sigma^2); 'thesis': exp(-|r-s| / 2 sigma^2) "
-        "as printed in (2.11), so wide that a map stays contracted for hundreds of samples")
+        "gaussian",
+        description="'gaussian': exp(-|r-s|^2 / 2 sigma^2); 'thesis': exp(-|r-s| / 2 sigma^2) "
+        "as printed in (2.11), so wide that a map stays contracted for hundreds of samples",
+    )
 
 
 class SelfOrganisingMap:

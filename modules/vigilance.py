@@ -30,8 +30,12 @@ class VigilanceParams(ModuleParams):
     value: float = Field(0.0, ge=-3.0, le=3.0, description="fixed s_vig, or the adaptive start")
     step: float = Field(0.01, gt=0, le=0.5, description="adaptive change per trial")
     reject_limit: int = Field(1000, ge=1, description="consecutive no-go samples before one step down")
-    dim: int | None = Field(None, ge=1, le=8, description="parameter-space dimension for D = sqrt(dim) "
-                            "(default: the scenario's number of axes)")
+    dim: int | None = Field(
+        None,
+        ge=1,
+        le=8,
+        description="parameter-space dimension for D = sqrt(dim) (default: the scenario's number of axes)",
+    )
     a1: float = 0.9
     a2: float = 1.47
     b1: float = 0.15

@@ -1,4 +1,4 @@
-"""The ``sfl`` command: run, check, list, inspect, worker, report."""
+"""The ``sfl`` command: run, check, study, list, inspect, worker, report."""
 
 from __future__ import annotations
 
@@ -58,17 +58,82 @@ def run_command(scenario, overrides, seed, out, viewer, viewer_url, realtime, li
     def ready(sup, seconds):
         view.ready(seconds)
         if listen:
-            click.echo(f"sfl: run id {sup.run_id}; workers may join with: sfl worker {scenario} "
-                       f"--connect {listen[0]} --run-id {sup.run_id}")
+            click.echo(
+                f"sfl: run id {sup.run_id}; workers may join with: sfl worker {scenario} "
+                f"--connect {listen[0]} --run-id {sup.run_id}"
+            )
 
     with view:
-        run_dir, summary = run(plan, out, viewer=viewer_url or viewer, realtime=realtime, listen=list(listen) or None,
-                               connect=list(connect) or None, on_progress=view.update, on_ready=ready)
+        run_dir, summary = run(
+            plan,
+            out,
+            viewer=viewer_url or viewer,
+            realtime=realtime,
+            listen=list(listen) or None,
+            connect=list(connect) or None,
+            on_progress=view.update,
+            on_ready=ready,
+        )
     view.report(run_dir, summary)
     if summary["status"] == "failed":
         sys.exit(1)
     if summary["status"] == "interrupted":
         sys.exit(130)
+
+
+@main.command()
+@click.argument("scenario", type=click.Path(dir_okay=False))
+@click.option("--vary", "vary", multiple=True, metavar="KEY.PATH=V1,V2,...", help="values to run (one run each)")
+@click.option("--seeds", default="", metavar="S1,S2,...", help="seeds to run each value with")
+@click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE", help="override for every run")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True, help="study folder")
+@click.option("--quiet", is_flag=True, help="no progress bar")
+def study(scenario, vary, seeds, overrides, out, quiet) -> None:
+    """Run SCENARIO once per combination of --vary values and --seeds, then report them together.
+
+    Every combination is checked before the first run starts. Runs go to OUT/<name>; the
+    figures and the table (with success rate against vigilance) go to OUT/report.
+    """
+    import itertools
+
+    from .progress import ProgressView
+    from .report import write_report
+    from .run import run
+
+    axes = []
+    for item in vary:
+        key, sep, values = item.partition("=")
+        if not sep or not values:
+            click.echo(f"sfl: --vary {item!r}: expected KEY.PATH=V1,V2,...", err=True)
+            sys.exit(EXIT_BAD_INPUT)
+        axes.append([(key, v) for v in values.split(",")])
+    try:
+        seed_list = [int(x) for x in seeds.split(",") if x.strip()] or [None]
+    except ValueError:
+        click.echo(f"sfl: --seeds {seeds!r}: expected integers separated by commas", err=True)
+        sys.exit(EXIT_BAD_INPUT)
+    runs = []
+    for combo in itertools.product(*axes):
+        for seed in seed_list:
+            sets = [*overrides, *(f"{k}={v}" for k, v in combo)]
+            name = "_".join(f"{k.rsplit('.', 1)[-1]}{v}" for k, v in combo) or "run"
+            name += "" if seed is None else f"_seed{seed}"
+            runs.append((name, _load_or_exit(scenario, sets, seed)))
+    click.echo(f"sfl: study of {len(runs)} runs into {out}")
+    done = []
+    for i, (name, plan) in enumerate(runs, 1):
+        view = ProgressView(plan, enabled=not quiet)
+        click.echo(f"sfl: [{i}/{len(runs)}] {name}")
+        with view:
+            run_dir, summary = run(
+                plan, out / name, on_progress=view.update, on_ready=lambda sup, s, v=view: v.ready(s)
+            )
+        view.report(run_dir, summary)
+        if summary["status"] == "interrupted":
+            sys.exit(130)
+        done.append(run_dir)
+    path = write_report(done, out / "report")
+    click.echo(f"sfl: report written to {path}")
 
 
 @main.command("list")
@@ -125,12 +190,27 @@ def worker(scenario, connect, run_id, name, overrides) -> None:
     body = next(i for i in plan.instances if i.spec_name == plan.body_spec)
     ctrl = body.colocated or next((i for i in plan.instances if i.name == body.routes.get("controller.sensors")), None)
     spec = {
-        "run_id": run_id, "instance": f"{plan.body_spec}.{name}", "spec_name": plan.body_spec,
-        "reference": body.reference, "params": body.params, "seed": instance_seed(plan.scenario.seed, plan.body_spec),
-        "routes": {}, "listen": ["tcp/127.0.0.1:0"], "connect": list(connect), "rrd": None, "viewer": None,
-        "tick_timeout": plan.scenario.timeouts.trial, "watch_stdin": False,
-        "colocated": None if ctrl is None else {"reference": ctrl.reference, "params": ctrl.params,
-                                                 "seed": ctrl.seed, "spec_name": ctrl.spec_name},
+        "run_id": run_id,
+        "instance": f"{plan.body_spec}.{name}",
+        "spec_name": plan.body_spec,
+        "reference": body.reference,
+        "params": body.params,
+        "seed": instance_seed(plan.scenario.seed, plan.body_spec),
+        "routes": {},
+        "listen": ["tcp/127.0.0.1:0"],
+        "connect": list(connect),
+        "rrd": None,
+        "viewer": None,
+        "tick_timeout": plan.scenario.timeouts.trial,
+        "watch_stdin": False,
+        "colocated": None
+        if ctrl is None
+        else {
+            "reference": ctrl.reference,
+            "params": ctrl.params,
+            "seed": ctrl.seed,
+            "spec_name": ctrl.spec_name,
+        },
     }
     click.echo(f"sfl: worker {spec['instance']} joining run {run_id} via {', '.join(connect)}")
     sys.exit(host_main([json.dumps(spec)]))

@@ -22,12 +22,16 @@ def sample_messages(module: Module) -> list[m.Message]:
     rng = np.random.default_rng(0)
     samples = {
         m.VigilanceStart: [m.VigilanceStart()],
-        m.TrialDone: [m.TrialDone(trial_index=1, success=True, n_success=1, n_failure=0),
-                      m.TrialDone(trial_index=2, success=False, n_success=1, n_failure=1)],
+        m.TrialDone: [
+            m.TrialDone(trial_index=1, success=True, n_success=1, n_failure=0),
+            m.TrialDone(trial_index=2, success=False, n_success=1, n_failure=1),
+        ],
         m.Rejected: [m.Rejected(consecutive=1000)],
         m.Grade: [m.Grade(eta=0.3), m.Grade(eta=0.7), m.Grade(eta=0.5)],
-        m.Learn: [m.Learn(v=rng.random(dim), success=True, rho=1.0),
-                  m.Learn(v=rng.random(dim), success=False, rho=1.0)],
+        m.Learn: [
+            m.Learn(v=rng.random(dim), success=True, rho=1.0),
+            m.Learn(v=rng.random(dim), success=False, rho=1.0),
+        ],
         m.Evaluate: [m.Evaluate(candidates=rng.random((8, dim)), s_vig=0.0)],
         m.Exploit: [m.Exploit(axis=0, conditions=np.linspace(0, 1, 3))],
     }
@@ -50,8 +54,15 @@ def _replies(cls: type[Module], seed: int) -> list:
         module.close()
         return [result]
     if isinstance(module, Controller):
-        module.handle(m.ControllerReset(trial_id=0, seed=seed, params={}, sensors=list(cls.REQUIRED_SENSORS),
-                                        commands=list(cls.COMMANDS)))
+        module.handle(
+            m.ControllerReset(
+                trial_id=0,
+                seed=seed,
+                params={},
+                sensors=list(cls.REQUIRED_SENSORS),
+                commands=list(cls.COMMANDS),
+            )
+        )
         frame = m.SensorFrame(trial_id=0, tick=0, values=np.zeros(len(cls.REQUIRED_SENSORS)))
         reply = module.handle(frame)
         assert len(reply.values) == len(cls.COMMANDS), f"{cls.__name__}: {len(reply.values)} commands"

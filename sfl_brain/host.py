@@ -92,8 +92,11 @@ class BusLink:
                 except MessageError as exc:
                     log.warning("dropped malformed command: %s", exc)
                     continue
-                if (not isinstance(command, MotorCommand) or command.trial_id != frame.trial_id
-                        or command.tick != frame.tick):
+                if (
+                    not isinstance(command, MotorCommand)
+                    or command.trial_id != frame.trial_id
+                    or command.tick != frame.tick
+                ):
                     log.warning("dropped unexpected message %s", getattr(command, "TAG", command))
                     continue
                 return command
@@ -173,20 +176,30 @@ class Host:
                 self.module.realtime = bool(spec.get("realtime"))
                 colocated = spec.get("colocated")
                 if colocated:
-                    controller = make_module(colocated["reference"], colocated["params"], colocated["seed"],
-                                             colocated["spec_name"])
+                    controller = make_module(
+                        colocated["reference"], colocated["params"], colocated["seed"], colocated["spec_name"]
+                    )
                     controller.recording = rec
                     self.module.link = InProcessLink(controller)
                 elif self.module.COMMANDS:
-                    link = BusLink(self.session, self.run_id, self.instance, spec["routes"][SensorFrame.TAG],
-                                   spec["tick_timeout"])
+                    link = BusLink(
+                        self.session,
+                        self.run_id,
+                        self.instance,
+                        spec["routes"][SensorFrame.TAG],
+                        spec["tick_timeout"],
+                    )
                     self.module.link = link
             for message_type in type(self.module).handles:
                 key_expr = bus.key(self.run_id, self.instance, message_type.TAG)
                 if message_type.STREAM:  # one thread blocks in recv(): no Python handoff per tick
                     subscriber = self.session.declare_subscriber(key_expr, zenoh.handlers.RingChannel(64))
-                    thread = threading.Thread(target=self._stream_loop, args=(subscriber,), daemon=True,
-                                              name=f"stream-{message_type.TAG}")
+                    thread = threading.Thread(
+                        target=self._stream_loop,
+                        args=(subscriber,),
+                        daemon=True,
+                        name=f"stream-{message_type.TAG}",
+                    )
                     thread.start()
                     streams.append((key_expr, subscriber, thread))
                 else:
@@ -288,8 +301,11 @@ def _watch_parent(inbox: queue.SimpleQueue) -> None:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     spec = json.loads(argv[0])
-    logging.basicConfig(level=spec.get("log_level", "INFO"),
-                        format=f"%(asctime)s {spec['instance']} %(levelname)s %(message)s", stream=sys.stderr)
+    logging.basicConfig(
+        level=spec.get("log_level", "INFO"),
+        format=f"%(asctime)s {spec['instance']} %(levelname)s %(message)s",
+        stream=sys.stderr,
+    )
     host = Host(spec)
     signal.signal(signal.SIGTERM, lambda *_: host.inbox.put(STOP))
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the supervisor's to handle

@@ -39,7 +39,9 @@ class LocalSupervisor:
             if isinstance(module, Body):
                 module.worker = inst.name
                 if module.COMMANDS:
-                    ctrl = inst.colocated or next(i for i in plan.instances if i.name == inst.routes["controller.sensors"])
+                    ctrl = inst.colocated or next(
+                        i for i in plan.instances if i.name == inst.routes["controller.sensors"]
+                    )
                     module.link = InProcessLink(make_module(ctrl.reference, ctrl.params, ctrl.seed, ctrl.spec_name))
             self.modules[inst.name] = module
         self._results: dict[int, Message] = {}

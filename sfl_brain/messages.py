@@ -85,8 +85,11 @@ def message(tag: str, *, stream: bool = False):
         cls.TAG = tag
         cls.STREAM = stream
         cls._FIELDS = names
-        cls._CHECKS = tuple((i, n, c if isinstance(c, tuple) else (c,))
-                            for i, n in enumerate(names) if (c := _checker(hints[n])) is not None)
+        cls._CHECKS = tuple(
+            (i, n, c if isinstance(c, tuple) else (c,))
+            for i, n in enumerate(names)
+            if (c := _checker(hints[n])) is not None
+        )
         _REGISTRY[tag] = cls
         return cls
 
@@ -146,9 +149,7 @@ def _ext_hook(code: int, data: bytes) -> Any:
 
 def encode(msg: Message) -> bytes:
     """Serialise a registered message to bytes."""
-    return msgpack.packb(
-        [SCHEMA_VERSION, msg.TAG, [getattr(msg, name) for name in msg._FIELDS]], default=_default
-    )
+    return msgpack.packb([SCHEMA_VERSION, msg.TAG, [getattr(msg, name) for name in msg._FIELDS]], default=_default)
 
 
 def decode(data: bytes) -> Message:
@@ -173,7 +174,7 @@ def decode(data: bytes) -> Message:
         value = values[i]
         if not isinstance(value, check) or (value is True or value is False) and bool not in check:
             raise MessageError(f"{tag}.{name}: expected {check}, got {type(value).__name__}")
-    return cls(**dict(zip(cls._FIELDS, values)))
+    return cls(**dict(zip(cls._FIELDS, values, strict=True)))
 
 
 # ---------------------------------------------------------------------------

@@ -17,9 +17,14 @@ class ProgressView:
         self.console = Console(stderr=True)
         self.enabled = enabled
         self.bar = Progress(
-            TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
-            TextColumn("{task.fields[status]}"), TimeElapsedColumn(), console=self.console,
-            disable=not enabled, transient=False,
+            TextColumn("[bold]{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TextColumn("{task.fields[status]}"),
+            TimeElapsedColumn(),
+            console=self.console,
+            disable=not enabled,
+            transient=False,
         )
         self.task = None
 
@@ -33,8 +38,11 @@ class ProgressView:
         return False
 
     def ready(self, seconds: float) -> None:
-        self.bar.update(self.task, description=f"{self.plan.scenario.name}: trials",
-                        status=f"modules ready in {seconds:.2f} s")
+        self.bar.update(
+            self.task,
+            description=f"{self.plan.scenario.name}: trials",
+            status=f"modules ready in {seconds:.2f} s",
+        )
 
     def update(self, p: RunProgress) -> None:
         rate = p.successes / p.trials if p.trials else 0.0
@@ -52,9 +60,11 @@ class ProgressView:
         if summary.get("reason"):
             c.print(f"  reason: {summary['reason']}")
         rate = summary.get("success_rate")
-        c.print(f"  trials {summary['trials']} (successes {summary['successes']}, failures {summary['failures']}), "
-                f"decisions {summary['decisions']} (no-go {summary['no_go']}), "
-                f"success rate {'-' if rate is None else f'{rate:.1%}'}, "
-                f"final vigilance {summary['final_vigilance'] if summary['final_vigilance'] is not None else '-'}, "
-                f"wall {summary['wall_time_s']:.1f} s")
+        c.print(
+            f"  trials {summary['trials']} (successes {summary['successes']}, failures {summary['failures']}), "
+            f"decisions {summary['decisions']} (no-go {summary['no_go']}), "
+            f"success rate {'-' if rate is None else f'{rate:.1%}'}, "
+            f"final vigilance {summary['final_vigilance'] if summary['final_vigilance'] is not None else '-'}, "
+            f"wall {summary['wall_time_s']:.1f} s"
+        )
         c.print(f"  inspect: sfl inspect {run_dir}    view: rerun {run_dir / 'recording.rrd'}")

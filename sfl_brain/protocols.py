@@ -45,8 +45,15 @@ class Progress:
 class Conductor:
     """The protocol's view of the running modules."""
 
-    def __init__(self, plan: Plan, supervisor: Supervisor, writer: RecordWriter, rerun_log,
-                 run_dir: Path, on_progress: Callable[[Progress], None] | None = None) -> None:
+    def __init__(
+        self,
+        plan: Plan,
+        supervisor: Supervisor,
+        writer: RecordWriter,
+        rerun_log,
+        run_dir: Path,
+        on_progress: Callable[[Progress], None] | None = None,
+    ) -> None:
         self.plan = plan
         self.sup = supervisor
         self.writer = writer
@@ -66,7 +73,7 @@ class Conductor:
         while len(results) < len(tokens):
             results.update(self.sup.wait_any([t for t in tokens if t not in results]))
         replies = []
-        for token, msg in zip(tokens, messages, strict=True):
+        for token in tokens:
             result = results[token]
             if isinstance(result, Exception):
                 raise RunError(str(result)) from None
@@ -114,15 +121,22 @@ class Conductor:
 
     def trial_request(self, trial_id: int, unit: np.ndarray, log: bool) -> m.TrialRequest:
         physical = self.plan.to_physical(unit)
-        return m.TrialRequest(trial_id=trial_id, seed=trial_seed(self.plan.scenario.seed, trial_id),
-                              body_params=physical["body"], controller_params=physical["controller"], log=log)
+        return m.TrialRequest(
+            trial_id=trial_id,
+            seed=trial_seed(self.plan.scenario.seed, trial_id),
+            body_params=physical["body"],
+            controller_params=physical["controller"],
+            log=log,
+        )
 
     def should_log_body(self, trial_id: int) -> bool:
         every = self.plan.scenario.record.body_every
         return every > 0 and trial_id % every == 0
 
     def physical_row(self, unit: np.ndarray) -> dict:
-        return {a.name: float(a.low + u * (a.high - a.low)) for a, u in zip(self.plan.scenario.space, unit, strict=True)}
+        return {
+            a.name: float(a.low + u * (a.high - a.low)) for a, u in zip(self.plan.scenario.space, unit, strict=True)
+        }
 
 
 def run_learn(c: Conductor) -> dict:
@@ -156,10 +170,17 @@ def run_learn(c: Conductor) -> dict:
         used = 0
         for i in range(batch):
             go = bool(evaluation.go[i])
-            row = {"kind": "decision", "decision": decision, "trial": progress.trials if go else None,
-                   "go": go, "s_vig": threshold.s_vig, "d_success": float(evaluation.d_success[i]),
-                   "d_failure": float(evaluation.d_failure[i]), "v_unit": candidates[i].tolist(),
-                   **c.physical_row(candidates[i])}
+            row = {
+                "kind": "decision",
+                "decision": decision,
+                "trial": progress.trials if go else None,
+                "go": go,
+                "s_vig": threshold.s_vig,
+                "d_success": float(evaluation.d_success[i]),
+                "d_failure": float(evaluation.d_failure[i]),
+                "v_unit": candidates[i].tolist(),
+                **c.physical_row(candidates[i]),
+            }
             rows.append(row)
             decision += 1
             used = i + 1
@@ -189,7 +210,7 @@ def run_learn(c: Conductor) -> dict:
             continue
         v = candidates[chosen]
         trial_id = progress.trials
-        (request, result, wall), = c.trials([c.trial_request(trial_id, v, c.should_log_body(trial_id))])
+        ((request, result, wall),) = c.trials([c.trial_request(trial_id, v, c.should_log_body(trial_id))])
         rho = None
         if result.success:
             reward: m.Reward = c.call(m.Grade(eta=result.quality))
@@ -201,18 +222,32 @@ def run_learn(c: Conductor) -> dict:
         low, high = threshold.low, threshold.high
         learned, threshold = c.call_all(  # ACC and vigilance learn from the trial in parallel
             m.Learn(v=v, success=result.success, rho=rho if rho is not None else 1.0),
-            m.TrialDone(trial_index=trial_id + 1, success=result.success, n_success=n_success,
-                        n_failure=n_failure))
+            m.TrialDone(trial_index=trial_id + 1, success=result.success, n_success=n_success, n_failure=n_failure),
+        )
         progress.trials += 1
         progress.successes = n_success
         progress.s_vig = threshold.s_vig
-        row = {"kind": "trial", "trial": trial_id, "decision": decision - 1, "success": result.success,
-               "quality": result.quality, "rho": rho, "n_success": n_success, "n_failure": n_failure,
-               "ns_nf": n_success / n_failure if n_failure else None,
-               "success_rate": n_success / progress.trials, "s_vig": s_vig_used, "band_low": low,
-               "band_high": high, "map_change": learned.change, "worker": result.worker,
-               "wall_ms": wall * 1e3, "v_unit": v.tolist(), **c.physical_row(v),
-               **{f"m_{k}": val for k, val in result.metrics.items()}}
+        row = {
+            "kind": "trial",
+            "trial": trial_id,
+            "decision": decision - 1,
+            "success": result.success,
+            "quality": result.quality,
+            "rho": rho,
+            "n_success": n_success,
+            "n_failure": n_failure,
+            "ns_nf": n_success / n_failure if n_failure else None,
+            "success_rate": n_success / progress.trials,
+            "s_vig": s_vig_used,
+            "band_low": low,
+            "band_high": high,
+            "map_change": learned.change,
+            "worker": result.worker,
+            "wall_ms": wall * 1e3,
+            "v_unit": v.tolist(),
+            **c.physical_row(v),
+            **{f"m_{k}": val for k, val in result.metrics.items()},
+        }
         c.writer.write(row)
         c.rr.trial(row)
         progress.last = row
@@ -236,10 +271,18 @@ def run_sweep(c: Conductor) -> dict:
         unit = points[request.trial_id]
         progress.trials += 1
         progress.successes += int(result.success)
-        row = {"kind": "trial", "trial": request.trial_id, "success": result.success, "quality": result.quality,
-               "worker": result.worker, "wall_ms": wall * 1e3, "v_unit": unit.tolist(),
-               "success_rate": progress.successes / progress.trials, **c.physical_row(unit),
-               **{f"m_{k}": val for k, val in result.metrics.items()}}
+        row = {
+            "kind": "trial",
+            "trial": request.trial_id,
+            "success": result.success,
+            "quality": result.quality,
+            "worker": result.worker,
+            "wall_ms": wall * 1e3,
+            "v_unit": unit.tolist(),
+            "success_rate": progress.successes / progress.trials,
+            **c.physical_row(unit),
+            **{f"m_{k}": val for k, val in result.metrics.items()},
+        }
         c.writer.write(row)
         c.rr.trial(row)
         progress.last = row
@@ -258,21 +301,35 @@ def run_exploit(c: Conductor) -> dict:
     # the controller receives the whole table and switches neurons by the sensed condition
     physical_table = {
         "condition": [float(spec.low + u * (spec.high - spec.low)) for u in table.conditions],
-        **{a.target.partition(".")[2]: [float(a.low + w * (a.high - a.low)) for w in table.weights[:, j]]
-           for j, a in enumerate(c.plan.scenario.space) if j != axis and a.target.startswith("controller.")},
+        **{
+            a.target.partition(".")[2]: [float(a.low + w * (a.high - a.low)) for w in table.weights[:, j]]
+            for j, a in enumerate(c.plan.scenario.space)
+            if j != axis and a.target.startswith("controller.")
+        },
     }
     progress = Progress(planned=proto.trials)
     base = c.plan.to_physical(np.full(len(axes), 0.5))
     for trial_id in range(proto.trials):
-        request = m.TrialRequest(trial_id=trial_id, seed=trial_seed(c.plan.scenario.seed, trial_id),
-                                 body_params=base["body"], controller_params={"switching_table": physical_table},
-                                 log=c.should_log_body(trial_id))
-        (_, result, wall), = c.trials([request])
+        request = m.TrialRequest(
+            trial_id=trial_id,
+            seed=trial_seed(c.plan.scenario.seed, trial_id),
+            body_params=base["body"],
+            controller_params={"switching_table": physical_table},
+            log=c.should_log_body(trial_id),
+        )
+        ((_, result, wall),) = c.trials([request])
         progress.trials += 1
         progress.successes += int(result.success)
-        row = {"kind": "trial", "trial": trial_id, "success": result.success, "quality": result.quality,
-               "worker": result.worker, "wall_ms": wall * 1e3, "success_rate": progress.successes / progress.trials,
-               **{f"m_{k}": val for k, val in result.metrics.items()}}
+        row = {
+            "kind": "trial",
+            "trial": trial_id,
+            "success": result.success,
+            "quality": result.quality,
+            "worker": result.worker,
+            "wall_ms": wall * 1e3,
+            "success_rate": progress.successes / progress.trials,
+            **{f"m_{k}": val for k, val in result.metrics.items()},
+        }
         c.writer.write(row)
         c.rr.trial(row)
         progress.last = row

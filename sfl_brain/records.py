@@ -22,8 +22,17 @@ from typing import Any
 
 import numpy as np
 
-SUMMARY_FIELDS = ("trials", "successes", "failures", "decisions", "no_go", "success_rate",
-                  "final_vigilance", "best_quality", "wall_time_s")
+SUMMARY_FIELDS = (
+    "trials",
+    "successes",
+    "failures",
+    "decisions",
+    "no_go",
+    "success_rate",
+    "final_vigilance",
+    "best_quality",
+    "wall_time_s",
+)
 
 
 def _plain(value: Any) -> Any:
@@ -81,8 +90,9 @@ def summarise(rows: list[dict], wall_time_s: float | None = None) -> dict:
     decisions = [r for r in rows if r.get("kind") == "decision"]
     successes = sum(1 for r in trials if r.get("success"))
     qualities = [r["quality"] for r in trials if r.get("success") and r.get("quality") is not None]
-    vig = [r["s_vig"] for r in trials if r.get("s_vig") is not None] or \
-          [r["s_vig"] for r in decisions if r.get("s_vig") is not None]
+    vig = [r["s_vig"] for r in trials if r.get("s_vig") is not None] or [
+        r["s_vig"] for r in decisions if r.get("s_vig") is not None
+    ]
     return {
         "trials": len(trials),
         "successes": successes,

@@ -2,7 +2,9 @@
 
 * a sweep run: the viability map over the first two axes (success coloured by walking speed);
 * a learn run: both maps after learning (from ``acc.npz``) over the tried points;
-* for every run a table row: protocol, vigilance, trials, success rate, next to the thesis's figure.
+* for every run a table row: protocol, vigilance, trials, success rate, next to the thesis's figure;
+* learn runs at two or more fixed vigilance values: success rate against s_vig, every seed a dot,
+  the mean a line, the thesis's E3.2 values as crosses (Fig. 3.13), and a table of the means.
 """
 
 from __future__ import annotations
@@ -59,9 +61,58 @@ def _figure(run_dir: Path, out: Path, scenario: dict, rows: list[dict]) -> str:
     return path.name
 
 
+THESIS_E32_VALUES = {0.05: 0.98, 0.0: 0.96, -0.1: 0.45, -0.2: 0.28}
+
+
+def _vigilance_figure(points: list[tuple[float, float, int]], out: Path) -> tuple[str, list[str]]:
+    """Success rate against fixed s_vig over runs (seeds); returns the PNG name and table lines."""
+    values = sorted({v for v, _, _ in points})
+    if len(values) < 2:
+        return "", []
+    fig, ax = plt.subplots(figsize=(5.5, 4))
+    xs = np.array([v for v, _, _ in points])
+    ys = np.array([r for _, r, _ in points])
+    ax.scatter(xs, ys, s=14, c="tab:blue", alpha=0.6, label="one run (seed)")
+    means = [float(np.mean(ys[xs == v])) for v in values]
+    ax.plot(values, means, "-o", c="tab:blue", label="mean over seeds")
+    tv = sorted(THESIS_E32_VALUES)
+    ax.plot(tv, [THESIS_E32_VALUES[v] for v in tv], "kx", ms=8, label="thesis (§3.5.1)")
+    ax.set_xlabel("vigilance threshold s_vig")
+    ax.set_ylabel("rate of succeeded trials")
+    ax.set_ylim(0, 1.02)
+    ax.invert_xaxis()
+    ax.legend(fontsize=7)
+    ax.set_title("success rate against vigilance (Fig. 3.13)")
+    fig.tight_layout()
+    fig.savefig(out / "success_vs_vigilance.png", dpi=110)
+    plt.close(fig)
+    lines = [
+        "",
+        "## Success rate against vigilance",
+        "",
+        "![](success_vs_vigilance.png)",
+        "",
+        "| s_vig | runs | trials (mean) | success rate, mean | min | max | thesis |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for v, mean in zip(values, means, strict=True):
+        rates = ys[xs == v]
+        trials = np.mean([n for x, _, n in points if x == v])
+        thesis = THESIS_E32.get(v, "")
+        lines.append(
+            f"| {v:+.2f} | {len(rates)} | {trials:.0f} | {mean:.1%} | {rates.min():.1%} | {rates.max():.1%} "
+            f"| {thesis} |"
+        )
+    return "success_vs_vigilance.png", lines
+
+
 def write_report(run_dirs: list[Path], out: Path) -> Path:
     out.mkdir(parents=True, exist_ok=True)
-    lines = ["| run | protocol | s_vig | trials | success rate | thesis | figure |", "|---|---|---|---|---|---|---|"]
+    points: list[tuple[float, float, int]] = []
+    lines = [
+        "| run | protocol | s_vig | trials | success rate | thesis | figure |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for run_dir in run_dirs:
         scenario = yaml.safe_load((run_dir / "scenario.yaml").read_text())
         rows = read_records(run_dir)
@@ -71,10 +122,15 @@ def write_report(run_dirs: list[Path], out: Path) -> Path:
         thesis = THESIS_E32.get(s_vig, "") if scenario["protocol"]["kind"] == "learn" else ""
         figure = _figure(run_dir, out, scenario, rows)
         rate = summary["success_rate"]
-        lines.append(f"| {run_dir.name} | {scenario['protocol']['kind']} | {s_vig if s_vig is not None else '-'} | "
-                     f"{summary['trials']} | {'-' if rate is None else f'{rate:.1%}'} | {thesis} | "
-                     f"{f'![]({figure})' if figure else ''} |")
+        if scenario["protocol"]["kind"] == "learn" and isinstance(s_vig, int | float) and rate is not None:
+            points.append((float(s_vig), float(rate), int(summary["trials"])))
+        lines.append(
+            f"| {run_dir.name} | {scenario['protocol']['kind']} | {s_vig if s_vig is not None else '-'} | "
+            f"{summary['trials']} | {'-' if rate is None else f'{rate:.1%}'} | {thesis} | "
+            f"{f'![]({figure})' if figure else ''} |"
+        )
+    _, vigilance_lines = _vigilance_figure(points, out)
     path = out / "README.md"
-    path.write_text("# Results\n\n" + "\n".join(lines) + "\n")
+    path.write_text("# Results\n\n" + "\n".join(lines + vigilance_lines) + "\n")
     (out / "summary.json").write_text(json.dumps({str(d): summarise(read_records(d)) for d in run_dirs}, indent=1))
     return path

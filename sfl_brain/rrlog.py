@@ -69,8 +69,11 @@ class RerunLog:
         self._maybe_flush()
 
     def _maybe_flush(self) -> None:
-        if (len(self._decisions) >= self.FLUSH_ROWS or len(self._trials) >= self.FLUSH_ROWS
-                or time.monotonic() - self._flushed > self.FLUSH_SECONDS):
+        if (
+            len(self._decisions) >= self.FLUSH_ROWS
+            or len(self._trials) >= self.FLUSH_ROWS
+            or time.monotonic() - self._flushed > self.FLUSH_SECONDS
+        ):
             self.flush()
 
     def flush(self) -> None:
@@ -97,8 +100,9 @@ class RerunLog:
         kept = [r for r in rows if r.get(key) is not None]
         if not kept:
             return
-        self.rec.send_columns(path, self._index(kept),
-                              rr.Scalars.columns(scalars=np.array([float(r[key]) for r in kept])))
+        self.rec.send_columns(
+            path, self._index(kept), rr.Scalars.columns(scalars=np.array([float(r[key]) for r in kept]))
+        )
 
     @staticmethod
     def _index(rows: list[dict]) -> list:
@@ -108,21 +112,40 @@ class RerunLog:
         return index
 
     def _send_trials(self, rows: list[dict]) -> None:
-        for path, key in (("trials/success", "success"), ("trials/success_rate", "success_rate"),
-                          ("trials/quality", "quality"), ("trials/rho", "rho"), ("trials/ns_nf", "ns_nf"),
-                          ("vigilance/s_vig", "s_vig"), ("vigilance/band_low", "band_low"),
-                          ("vigilance/band_high", "band_high")):
+        for path, key in (
+            ("trials/success", "success"),
+            ("trials/success_rate", "success_rate"),
+            ("trials/quality", "quality"),
+            ("trials/rho", "rho"),
+            ("trials/ns_nf", "ns_nf"),
+            ("vigilance/s_vig", "s_vig"),
+            ("vigilance/band_low", "band_low"),
+            ("vigilance/band_high", "band_high"),
+        ):
             self._series(path, rows, key)
         placed = [r for r in rows if r.get("v_unit") is not None and len(r["v_unit"]) >= 2]
         if placed:
-            self.rec.send_columns("omega/trials", self._index(placed), rr.Points2D.columns(
-                positions=np.array([r["v_unit"][:2] for r in placed], dtype=float),
-                colors=np.array([SUCCESS if r["success"] else FAILURE for r in placed], dtype=np.uint8),
-                radii=np.full(len(placed), 0.006, dtype=np.float32)))
-        self.rec.send_columns("trials/log", self._index(rows), rr.TextLog.columns(text=[
-            f"trial {r['trial']}: {'success' if r['success'] else 'failure'}"
-            + (f", eta {r['quality']:.4g}" if r.get("quality") is not None else "")
-            + (f", rho {r['rho']:.3g}" if r.get("rho") is not None else "") for r in rows]))
+            self.rec.send_columns(
+                "omega/trials",
+                self._index(placed),
+                rr.Points2D.columns(
+                    positions=np.array([r["v_unit"][:2] for r in placed], dtype=float),
+                    colors=np.array([SUCCESS if r["success"] else FAILURE for r in placed], dtype=np.uint8),
+                    radii=np.full(len(placed), 0.006, dtype=np.float32),
+                ),
+            )
+        self.rec.send_columns(
+            "trials/log",
+            self._index(rows),
+            rr.TextLog.columns(
+                text=[
+                    f"trial {r['trial']}: {'success' if r['success'] else 'failure'}"
+                    + (f", eta {r['quality']:.4g}" if r.get("quality") is not None else "")
+                    + (f", rho {r['rho']:.3g}" if r.get("rho") is not None else "")
+                    for r in rows
+                ]
+            ),
+        )
 
     def close(self) -> None:
         self.flush()

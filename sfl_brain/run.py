@@ -36,11 +36,16 @@ def merge_recordings(run_dir: Path) -> Path | None:
     target = run_dir / "recording.rrd"
     rerun_cli = shutil.which("rerun")
     command = [rerun_cli] if rerun_cli else [sys.executable, "-m", "rerun"]
-    done = subprocess.run([*command, "rrd", "merge", "--continue-on-error", "-o", str(target), *map(str, parts)],
-                          capture_output=True, text=True)
+    done = subprocess.run(
+        [*command, "rrd", "merge", "--continue-on-error", "-o", str(target), *map(str, parts)],
+        capture_output=True,
+        text=True,
+    )
     if done.returncode != 0 or not target.exists():
-        print(f"sfl: could not merge Rerun parts (kept in {run_dir / 'rerun'}): {done.stderr.strip()[-400:]}",
-              file=sys.stderr)
+        print(
+            f"sfl: could not merge Rerun parts (kept in {run_dir / 'rerun'}): {done.stderr.strip()[-400:]}",
+            file=sys.stderr,
+        )
         return None
     for p in parts:
         p.unlink()
@@ -61,10 +66,17 @@ class _Terminate(Exception):
     pass
 
 
-def run(plan: Plan, out: Path | None = None, *, viewer: bool | str = False, realtime: bool = False,
-        listen: list[str] | None = None, connect: list[str] | None = None,
-        on_progress: Callable[[Progress], None] | None = None,
-        on_ready: Callable[[Supervisor, float], None] | None = None) -> tuple[Path, dict]:
+def run(
+    plan: Plan,
+    out: Path | None = None,
+    *,
+    viewer: bool | str = False,
+    realtime: bool = False,
+    listen: list[str] | None = None,
+    connect: list[str] | None = None,
+    on_progress: Callable[[Progress], None] | None = None,
+    on_ready: Callable[[Supervisor, float], None] | None = None,
+) -> tuple[Path, dict]:
     """Run a scenario plan to the end; returns (run folder, summary). Raises nothing for module deaths:
     the summary's ``status`` says ``completed``, ``failed`` or ``interrupted``."""
     run_dir = Path(out) if out else default_run_dir(plan)
@@ -81,8 +93,12 @@ def run(plan: Plan, out: Path | None = None, *, viewer: bool | str = False, real
     writer = RecordWriter(run_dir / "records.jsonl")
     sup = Supervisor(plan, run_dir, run_id, listen=listen, connect=connect, viewer=viewer_url, realtime=realtime)
     (run_dir / "rerun").mkdir(exist_ok=True)
-    rr_log = RerunLog(run_id, None if viewer_url else str(run_dir / "rerun" / "_supervisor.rrd"), viewer_url,
-                      [a.name for a in plan.scenario.space])
+    rr_log = RerunLog(
+        run_id,
+        None if viewer_url else str(run_dir / "rerun" / "_supervisor.rrd"),
+        viewer_url,
+        [a.name for a in plan.scenario.space],
+    )
     started = time.perf_counter()
     status, reason, extra = "completed", "", {}
     previous = signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(_Terminate()))
@@ -104,7 +120,14 @@ def run(plan: Plan, out: Path | None = None, *, viewer: bool | str = False, real
         if viewer_proc is None:
             merge_recordings(run_dir)
     summary = summarise(read_records(run_dir), time.perf_counter() - started)
-    summary.update(status=status, reason=reason, run_id=run_id, scenario=plan.scenario.name,
-                   seed=plan.scenario.seed, protocol=plan.scenario.protocol.kind, **extra)
+    summary.update(
+        status=status,
+        reason=reason,
+        run_id=run_id,
+        scenario=plan.scenario.name,
+        seed=plan.scenario.seed,
+        protocol=plan.scenario.protocol.kind,
+        **extra,
+    )
     (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return run_dir, summary

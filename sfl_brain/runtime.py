@@ -72,10 +72,28 @@ def log_tail(path: Path, lines: int = 12) -> str:
     return "\n".join("    " + line for line in text[-lines:])
 
 
+def _exits_soon(proc: subprocess.Popen, grace: float = 1.0) -> bool:
+    """True if the process has exited or exits within ``grace`` s (its sockets close before it is reaped)."""
+    try:
+        proc.wait(timeout=grace)
+        return True
+    except subprocess.TimeoutExpired:
+        return False
+
+
 class Supervisor:
-    def __init__(self, plan: Plan, run_dir: Path, run_id: str, *, listen: list[str] | None = None,
-                 connect: list[str] | None = None, viewer: str | None = None, realtime: bool = False,
-                 record: bool = True) -> None:
+    def __init__(
+        self,
+        plan: Plan,
+        run_dir: Path,
+        run_id: str,
+        *,
+        listen: list[str] | None = None,
+        connect: list[str] | None = None,
+        viewer: str | None = None,
+        realtime: bool = False,
+        record: bool = True,
+    ) -> None:
         self.plan = plan
         self.run_dir = run_dir
         self.run_id = run_id
@@ -131,9 +149,14 @@ class Supervisor:
             "viewer": self.viewer,
             "realtime": self.realtime,
             "tick_timeout": self.plan.scenario.timeouts.trial,
-            "colocated": None if colocated is None else {
-                "reference": colocated.reference, "params": colocated.params, "seed": colocated.seed,
-                "spec_name": colocated.spec_name},
+            "colocated": None
+            if colocated is None
+            else {
+                "reference": colocated.reference,
+                "params": colocated.params,
+                "seed": colocated.seed,
+                "spec_name": colocated.spec_name,
+            },
         }
         return spec
 
@@ -151,7 +174,9 @@ class Supervisor:
         child.alive = False
         child.proc = subprocess.Popen(
             [sys.executable, "-m", "sfl_brain.host", spec],
-            stdin=subprocess.PIPE, stdout=logf, stderr=subprocess.STDOUT,
+            stdin=subprocess.PIPE,
+            stdout=logf,
+            stderr=subprocess.STDOUT,
             start_new_session=True,  # Ctrl-C reaches the supervisor only; it stops the children
         )
         logf.close()
@@ -216,7 +241,13 @@ class Supervisor:
             if kind == "reply":
                 pending.result = event[2]
             elif pending.result is None:
-                pending.result = RunError(f"no reply from `{pending.target}` to `{pending.message.TAG}`")
+                child = self.children.get(pending.target)
+                if child is not None and child.proc is not None and _exits_soon(child.proc):
+                    return  # it died mid-request: its exit event decides (interrupt and restart, or fail)
+                if child is None and pending.target in self.external_workers:
+                    pending.result = Interrupted(f"worker `{pending.target}` did not answer")
+                else:
+                    pending.result = RunError(f"no reply from `{pending.target}` to `{pending.message.TAG}`")
             pending.done = kind == "drop" or pending.result is not None
             return
         name = event[1]
@@ -254,15 +285,25 @@ class Supervisor:
             restartable = issubclass(kind_of, Body | Controller)
             if child.instance.restart == "on-failure" and restartable and child.restarts < child.instance.max_restarts:
                 child.restarts += 1
-                log.warning("module %s exited with code %s: restart %d/%d", name, code, child.restarts,
-                            child.instance.max_restarts)
-                print(f"sfl: module `{name}` died (exit code {code}); restarting "
-                      f"({child.restarts}/{child.instance.max_restarts})", file=sys.stderr)
+                log.warning(
+                    "module %s exited with code %s: restart %d/%d",
+                    name,
+                    code,
+                    child.restarts,
+                    child.instance.max_restarts,
+                )
+                print(
+                    f"sfl: module `{name}` died (exit code {code}); restarting "
+                    f"({child.restarts}/{child.instance.max_restarts})",
+                    file=sys.stderr,
+                )
                 self._spawn(child)
                 return
-            raise RunError(f"module `{name}` ({child.instance.reference}) died with exit code {code}"
-                           f"{' before it was ready' if starting else ''}; its log ({child.log_path}):\n"
-                           f"{log_tail(child.log_path)}")
+            raise RunError(
+                f"module `{name}` ({child.instance.reference}) died with exit code {code}"
+                f"{' before it was ready' if starting else ''}; its log ({child.log_path}):\n"
+                f"{log_tail(child.log_path)}"
+            )
 
     def _interrupt(self, name: str, why: str) -> None:
         affected = {name}
@@ -318,7 +359,7 @@ class Supervisor:
         """Request/reply with a brain module; raise :class:`RunError` if it fails or dies."""
         timeout = timeout or self.plan.scenario.timeouts.request
         token = self.submit(target, message, timeout)
-        (_, result), = self.wait_any([token])
+        ((_, result),) = self.wait_any([token])
         if isinstance(result, Exception):
             raise RunError(str(result)) from None
         return result

@@ -157,8 +157,15 @@ def _fields_at(model: type[BaseModel], loc: tuple) -> list[str]:
             models = [a for a in args if isinstance(a, type) and issubclass(a, BaseModel)]
             branch = next((a for a in models if str(part) in a.model_fields), None)
             if branch is None:
-                branch = next((a for a in models if a.model_fields.get("kind") is not None and
-                               str(part) in str(a.model_fields["kind"].annotation)), None)
+                branch = next(
+                    (
+                        a
+                        for a in models
+                        if a.model_fields.get("kind") is not None
+                        and str(part) in str(a.model_fields["kind"].annotation)
+                    ),
+                    None,
+                )
                 if branch is not None:
                     current = branch
                     continue
@@ -188,25 +195,27 @@ def problems_from(exc: ValidationError, model: type[BaseModel], prefix: tuple = 
         given = err.get("input")
         if kind == "extra_forbidden":
             valid = _fields_at(model, clean[:-1])
-            out.append(Problem(path, f"unknown key; expected one of {sorted(valid)}",
-                               nearest(str(clean[-1]), valid)))
+            out.append(Problem(path, f"unknown key; expected one of {sorted(valid)}", nearest(str(clean[-1]), valid)))
         elif kind == "missing":
             out.append(Problem(path, "required key is missing"))
         elif kind == "literal_error":
             allowed = err.get("ctx", {}).get("expected", "")
             options = [o.strip().strip("'") for o in allowed.replace(" or ", ",").split(",") if o.strip()]
-            out.append(Problem(path, f"expected one of {allowed}; got {_short(given)}",
-                               nearest(str(given), options)))
+            out.append(Problem(path, f"expected one of {allowed}; got {_short(given)}", nearest(str(given), options)))
         elif kind == "union_tag_invalid":
             ctx = err.get("ctx", {})
             tags = [t.strip().strip("'") for t in str(ctx.get("expected_tags", "")).split(",")]
-            out.append(Problem(path + ".kind" if path else "kind",
-                               f"expected one of {ctx.get('expected_tags')}; got {_short(ctx.get('tag'))}",
-                               nearest(str(ctx.get("tag")), tags)))
+            out.append(
+                Problem(
+                    path + ".kind" if path else "kind",
+                    f"expected one of {ctx.get('expected_tags')}; got {_short(ctx.get('tag'))}",
+                    nearest(str(ctx.get("tag")), tags),
+                )
+            )
         else:
             msg = err["msg"]
             if msg.startswith("Value error, "):
-                msg = msg[len("Value error, "):]
+                msg = msg[len("Value error, ") :]
             out.append(Problem(path, f"{msg[0].lower() + msg[1:]}; got {_short(given)}"))
     return out
 
@@ -323,7 +332,9 @@ def read_yaml(path: Path) -> dict:
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
-        raise ScenarioError(str(path), [Problem("", f"{where}not valid YAML: {getattr(exc, 'problem', exc)}")]) from None
+        raise ScenarioError(
+            str(path), [Problem("", f"{where}not valid YAML: {getattr(exc, 'problem', exc)}")]
+        ) from None
     if not isinstance(raw, dict):
         raise ScenarioError(str(path), [Problem("", f"expected a mapping at the top; got {type(raw).__name__}")])
     return raw
@@ -374,20 +385,31 @@ def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
     providers: dict[str, str] = {}
     for name, (cls, _, _) in classes.items():
         for message_type in cls.handles:
-            if message_type.TAG in providers and message_type not in (m.ControllerReset, m.SensorFrame,
-                                                                      m.TrialRequest):
-                problems.append(Problem(f"modules.{name}", f"handles `{message_type.TAG}` as does module "
-                                        f"`{providers[message_type.TAG]}`; expected one handler"))
+            if message_type.TAG in providers and message_type not in (
+                m.ControllerReset,
+                m.SensorFrame,
+                m.TrialRequest,
+            ):
+                problems.append(
+                    Problem(
+                        f"modules.{name}",
+                        f"handles `{message_type.TAG}` as does module "
+                        f"`{providers[message_type.TAG]}`; expected one handler",
+                    )
+                )
             providers.setdefault(message_type.TAG, name)
     kind = scenario.protocol.kind
     for message_type, why in PROTOCOL_NEEDS[kind]:
         if message_type.TAG not in providers:
             family = message_type.TAG.split(".")[0]
-            problems.append(Problem(
-                "modules",
-                f"protocol `{kind}` sends `{message_type.TAG}` ({why}) but no module handles it; "
-                f"modules here: {sorted(classes)}",
-                f"{family}: {{impl: {HINT_IMPL.get(family, family)}}}"))
+            problems.append(
+                Problem(
+                    "modules",
+                    f"protocol `{kind}` sends `{message_type.TAG}` ({why}) but no module handles it; "
+                    f"modules here: {sorted(classes)}",
+                    f"{family}: {{impl: {HINT_IMPL.get(family, family)}}}",
+                )
+            )
     bodies = [n for n, (c, _, _) in classes.items() if issubclass(c, Body)]
     controllers = [n for n, (c, _, _) in classes.items() if issubclass(c, Controller)]
     if len(bodies) > 1:
@@ -399,30 +421,48 @@ def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
     if body_name:
         body_cls = classes[body_name][0]
         if body_cls.COMMANDS and not controller_name:
-            problems.append(Problem(f"modules.{body_name}",
-                                    f"body `{body_cls.__name__}` sends `controller.sensors` and needs a "
-                                    "controller; no module handles it", "controller: {impl: reflex}"))
+            problems.append(
+                Problem(
+                    f"modules.{body_name}",
+                    f"body `{body_cls.__name__}` sends `controller.sensors` and needs a "
+                    "controller; no module handles it",
+                    "controller: {impl: reflex}",
+                )
+            )
         if controller_name:
             ctrl_cls = classes[controller_name][0]
             if not body_cls.COMMANDS:
-                problems.append(Problem(f"modules.{controller_name}",
-                                        f"body `{body_name}` takes no commands; a controller is not used"))
+                problems.append(
+                    Problem(
+                        f"modules.{controller_name}",
+                        f"body `{body_name}` takes no commands; a controller is not used",
+                    )
+                )
             else:
                 missing = [s for s in ctrl_cls.REQUIRED_SENSORS if s not in body_cls.SENSORS]
                 if missing:
-                    problems.append(Problem(
-                        f"modules.{controller_name}",
-                        f"controller `{ctrl_cls.__name__}` reads sensors {missing} that body "
-                        f"`{body_name}` ({body_cls.__name__}) does not provide; it provides {list(body_cls.SENSORS)}"))
+                    problems.append(
+                        Problem(
+                            f"modules.{controller_name}",
+                            f"controller `{ctrl_cls.__name__}` reads sensors {missing} that body "
+                            f"`{body_name}` ({body_cls.__name__}) does not provide; "
+                            f"it provides {list(body_cls.SENSORS)}",
+                        )
+                    )
                 if tuple(ctrl_cls.COMMANDS) != tuple(body_cls.COMMANDS):
-                    problems.append(Problem(
-                        f"modules.{controller_name}",
-                        f"controller `{ctrl_cls.__name__}` commands {list(ctrl_cls.COMMANDS)}; body "
-                        f"`{body_name}` expects {list(body_cls.COMMANDS)}"))
+                    problems.append(
+                        Problem(
+                            f"modules.{controller_name}",
+                            f"controller `{ctrl_cls.__name__}` commands {list(ctrl_cls.COMMANDS)}; body "
+                            f"`{body_name}` expects {list(body_cls.COMMANDS)}",
+                        )
+                    )
 
     # --- targets of axes and conditions exist ----------------------------------------------------
-    owners = {"body": classes[body_name][0] if body_name else None,
-              "controller": classes[controller_name][0] if controller_name else None}
+    owners = {
+        "body": classes[body_name][0] if body_name else None,
+        "controller": classes[controller_name][0] if controller_name else None,
+    }
     targets = [(f"space.{i}.target", a.target) for i, a in enumerate(scenario.space)]
     targets += [(f"conditions.{k}", k) for k in scenario.conditions]
     for where, target in targets:
@@ -434,15 +474,23 @@ def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
         if cls is None:
             problems.append(Problem(where, f"targets the {owner}, but the scenario has no {owner} module"))
         elif param not in cls.TRIAL_PARAMS:
-            problems.append(Problem(where, f"{cls.__name__} takes trial parameters {list(cls.TRIAL_PARAMS)}; "
-                                    f"got {param!r}", f"{owner}.{nearest(param, cls.TRIAL_PARAMS)}"
-                                    if nearest(param, cls.TRIAL_PARAMS) else None))
+            problems.append(
+                Problem(
+                    where,
+                    f"{cls.__name__} takes trial parameters {list(cls.TRIAL_PARAMS)}; got {param!r}",
+                    f"{owner}.{nearest(param, cls.TRIAL_PARAMS)}" if nearest(param, cls.TRIAL_PARAMS) else None,
+                )
+            )
     if kind == "exploit":
         names = [a.name for a in scenario.space]
         if scenario.protocol.condition not in names:
-            problems.append(Problem("protocol.condition", f"expected one of {names}; got "
-                                    f"{scenario.protocol.condition!r}",
-                                    nearest(scenario.protocol.condition, names)))
+            problems.append(
+                Problem(
+                    "protocol.condition",
+                    f"expected one of {names}; got {scenario.protocol.condition!r}",
+                    nearest(scenario.protocol.condition, names),
+                )
+            )
         maps = Path(scenario.protocol.maps)
         if not maps.is_absolute() and not maps.exists():
             maps = base_dir / maps
@@ -462,17 +510,34 @@ def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
         count = spec.workers if name == body_name else 1
         for k in range(count):
             inst_name = name if count == 1 else f"{name}.{k}"
-            inst = Instance(inst_name, name, cls, reference, params, instance_seed(scenario.seed, name),
-                            spec.restart, spec.max_restarts, dict(routes))
+            inst = Instance(
+                inst_name,
+                name,
+                cls,
+                reference,
+                params,
+                instance_seed(scenario.seed, name),
+                spec.restart,
+                spec.max_restarts,
+                dict(routes),
+            )
             if name == body_name:
                 body_instances.append(inst_name)
                 if controller_name:
                     cspec = scenario.modules[controller_name]
                     ccls, cref, cparams = classes[controller_name]
                     cname = controller_name if count == 1 else f"{controller_name}.{k}"
-                    ctrl = Instance(cname, controller_name, ccls, cref, cparams,
-                                    instance_seed(scenario.seed, controller_name), cspec.restart,
-                                    cspec.max_restarts, {m.MotorCommand.TAG: inst_name})
+                    ctrl = Instance(
+                        cname,
+                        controller_name,
+                        ccls,
+                        cref,
+                        cparams,
+                        instance_seed(scenario.seed, controller_name),
+                        cspec.restart,
+                        cspec.max_restarts,
+                        {m.MotorCommand.TAG: inst_name},
+                    )
                     inst.routes[m.SensorFrame.TAG] = cname
                     if cspec.colocate:
                         inst.colocated = ctrl

@@ -12,8 +12,14 @@ SCENARIOS = ROOT / "scenarios"
 
 def sfl(*args: str, timeout: float = 300, **kw) -> subprocess.CompletedProcess:
     """Run the real ``sfl`` command in a subprocess."""
-    return subprocess.run([sys.executable, "-m", "sfl_brain.cli", *args], capture_output=True, text=True,
-                          timeout=timeout, cwd=kw.pop("cwd", ROOT), **kw)
+    return subprocess.run(
+        [sys.executable, "-m", "sfl_brain.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=kw.pop("cwd", ROOT),
+        **kw,
+    )
 
 
 @pytest.fixture

@@ -43,7 +43,7 @@ def test_update_follows_equations_2_10_2_11_and_5_1(neighbourhood, power):
     winner = s.winner(v)
     s.update(v, rho=2.0)
     grid_distance = np.linalg.norm(s.grid - s.grid[winner], axis=1)
-    h = np.exp(-grid_distance**power / (2 * 1.5**2))  # (2.11): Gaussian, or as printed (no square)
+    h = np.exp(-(grid_distance**power) / (2 * 1.5**2))  # (2.11): Gaussian, or as printed (no square)
     np.testing.assert_allclose(s.weights, w0 + 0.4 * 2.0 * h[:, None] * (v - w0))
     assert s.wins[winner] == 1 and s.samples == 1
     assert s.learning_rate() == pytest.approx(0.4)

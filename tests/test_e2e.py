@@ -36,8 +36,15 @@ def rrd_rows(path):
 
 def test_learn_run_records_everything_and_matches_in_process(tmp_path):
     out = tmp_path / "run"
-    done = sfl("run", str(SCENARIOS / "analytic_learn.yaml"), "--set", "protocol.trials=60", "--out", str(out),
-               "--quiet")
+    done = sfl(
+        "run",
+        str(SCENARIOS / "analytic_learn.yaml"),
+        "--set",
+        "protocol.trials=60",
+        "--out",
+        str(out),
+        "--quiet",
+    )
     assert done.returncode == 0, done.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "completed" and summary["trials"] == 60
@@ -56,8 +63,17 @@ def test_learn_run_records_everything_and_matches_in_process(tmp_path):
     assert stable(local) == stable(read_records(out))
     # sfl inspect --json prints exactly the summary fields
     inspected = json.loads(sfl("inspect", str(out), "--json").stdout)
-    assert set(inspected) == {"trials", "successes", "failures", "decisions", "no_go", "success_rate",
-                              "final_vigilance", "best_quality", "wall_time_s"}
+    assert set(inspected) == {
+        "trials",
+        "successes",
+        "failures",
+        "decisions",
+        "no_go",
+        "success_rate",
+        "final_vigilance",
+        "best_quality",
+        "wall_time_s",
+    }
     assert inspected["trials"] == 60 and inspected["no_go"] == summary["no_go"]
     # sfl report draws the maps over the tried points and tabulates the run
     report = sfl("report", str(out), "--out", str(tmp_path / "report"))
@@ -68,17 +84,35 @@ def test_learn_run_records_everything_and_matches_in_process(tmp_path):
 
 def test_sfl_list_names_every_registered_implementation():
     listing = sfl("list").stdout
-    for name, kind in (("acc", "brain"), ("vigilance", "brain"), ("ofc", "brain"), ("reflex", "controller"),
-                       ("planar_biped", "body"), ("analytic", "body")):
+    for name, kind in (
+        ("acc", "brain"),
+        ("vigilance", "brain"),
+        ("ofc", "brain"),
+        ("reflex", "controller"),
+        ("planar_biped", "body"),
+        ("analytic", "body"),
+    ):
         assert any(line.split()[:2] == [name, kind] for line in listing.splitlines()), listing
 
 
 def test_crashed_body_is_restarted_and_its_trial_retried(tmp_path):
     marker = tmp_path / "crashed"
     out = tmp_path / "run"
-    done = sfl("run", str(SCENARIOS / "analytic_learn.yaml"), "--set", "protocol.trials=20",
-               "--set", "modules.body.params.crash_at_trial=5", "--set", f"modules.body.params.crash_marker={marker}",
-               "--set", "modules.body.restart=on-failure", "--out", str(out), "--quiet")
+    done = sfl(
+        "run",
+        str(SCENARIOS / "analytic_learn.yaml"),
+        "--set",
+        "protocol.trials=20",
+        "--set",
+        "modules.body.params.crash_at_trial=5",
+        "--set",
+        f"modules.body.params.crash_marker={marker}",
+        "--set",
+        "modules.body.restart=on-failure",
+        "--out",
+        str(out),
+        "--quiet",
+    )
     assert done.returncode == 0, done.stderr
     assert marker.exists()
     assert "module `body` died (exit code 3); restarting" in done.stderr
@@ -90,8 +124,17 @@ def test_crashed_body_is_restarted_and_its_trial_retried(tmp_path):
 
 def test_dead_module_without_restart_is_reported_and_records_survive(tmp_path):
     out = tmp_path / "run"
-    done = sfl("run", str(SCENARIOS / "analytic_learn.yaml"), "--set", "protocol.trials=20",
-               "--set", "modules.body.params.crash_at_trial=5", "--out", str(out), "--quiet")
+    done = sfl(
+        "run",
+        str(SCENARIOS / "analytic_learn.yaml"),
+        "--set",
+        "protocol.trials=20",
+        "--set",
+        "modules.body.params.crash_at_trial=5",
+        "--out",
+        str(out),
+        "--quiet",
+    )
     assert done.returncode == 1
     assert "module `body`" in done.stderr and "died with exit code 3" in done.stderr
     assert "Traceback" not in done.stderr.split("its log")[0]
@@ -101,8 +144,13 @@ def test_dead_module_without_restart_is_reported_and_records_survive(tmp_path):
 
 
 def _start(args, tmp_path):
-    return subprocess.Popen([sys.executable, "-m", "sfl_brain.cli", "run", *args], cwd=ROOT, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(
+        [sys.executable, "-m", "sfl_brain.cli", "run", *args],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
 
 
 def _wait_for(predicate, timeout=60.0):
@@ -117,8 +165,19 @@ def _wait_for(predicate, timeout=60.0):
 def test_garbage_on_the_bus_is_logged_and_dropped(tmp_path):
     endpoint = bus.free_endpoint()
     out = tmp_path / "run"
-    proc = _start([str(SCENARIOS / "analytic_learn.yaml"), "--set", "protocol.trials=3000", "--listen", endpoint,
-                   "--out", str(out), "--quiet"], tmp_path)
+    proc = _start(
+        [
+            str(SCENARIOS / "analytic_learn.yaml"),
+            "--set",
+            "protocol.trials=3000",
+            "--listen",
+            endpoint,
+            "--out",
+            str(out),
+            "--quiet",
+        ],
+        tmp_path,
+    )
     line = proc.stdout.readline()
     assert "run id" in line, line
     run_id = line.split("run id ")[1].split(";")[0]
@@ -126,7 +185,12 @@ def test_garbage_on_the_bus_is_logged_and_dropped(tmp_path):
         # wait until this new peer sees every module of the run (gossip has reached it)
         assert _wait_for(lambda: len(list(session.liveliness().get(bus.alive_key(run_id, "*"), timeout=1.0))) == 4)
         errors = []
-        for target in ("acc/acc.evaluate", "vigilance/vigilance.trial_done", "ofc/ofc.grade", "body/body.trial"):
+        for target in (
+            "acc/acc.evaluate",
+            "vigilance/vigilance.trial_done",
+            "ofc/ofc.grade",
+            "body/body.trial",
+        ):
             for reply in session.get(f"sfl/{run_id}/{target}", payload=b"\x00garbage\xff", timeout=10):
                 errors.append(reply.err.payload.to_string() if reply.err else "ok?")
         session.put(f"sfl/{run_id}/acc/acc.evaluate", b"not even a query")
@@ -138,8 +202,10 @@ def test_garbage_on_the_bus_is_logged_and_dropped(tmp_path):
 
 def test_ctrl_c_stops_every_child_and_keeps_records(tmp_path):
     out = tmp_path / "run"
-    proc = _start([str(SCENARIOS / "quickstart.yaml"), "--set", "protocol.trials=100000", "--out", str(out),
-                   "--quiet"], tmp_path)
+    proc = _start(
+        [str(SCENARIOS / "quickstart.yaml"), "--set", "protocol.trials=100000", "--out", str(out), "--quiet"],
+        tmp_path,
+    )
     records = out / "records.jsonl"
     assert _wait_for(lambda: records.exists() and records.read_text().count('"kind":"trial"') >= 2, 120)
     children = psutil.Process(proc.pid).children(recursive=True)
@@ -158,21 +224,35 @@ def test_ctrl_c_stops_every_child_and_keeps_records(tmp_path):
 def test_user_module_from_a_file_is_swapped_in(tmp_path):
     """The README's example: a brain module in one short file, named by path in a scenario."""
     out = tmp_path / "run"
-    done = sfl("run", str(ROOT / "docs" / "examples" / "cautious.yaml"), "--set", "protocol.trials=30",
-               "--out", str(out), "--quiet")
+    done = sfl(
+        "run",
+        str(ROOT / "docs" / "examples" / "cautious.yaml"),
+        "--set",
+        "protocol.trials=30",
+        "--out",
+        str(out),
+        "--quiet",
+    )
     assert done.returncode == 0, done.stderr
     trials = [r for r in read_records(out) if r["kind"] == "trial"]
     assert len(trials) == 30
     # the user's module raised the threshold after each failure: s_vig never decreased
     s_vig = [r["s_vig"] for r in trials]
-    assert all(b >= a for a, b in zip(s_vig, s_vig[1:])) and s_vig[-1] > s_vig[0]
+    assert all(b >= a for a, b in zip(s_vig, s_vig[1:], strict=False)) and s_vig[-1] > s_vig[0]
 
 
 @pytest.mark.skipif(os.cpu_count() < 2, reason="needs two cores")
 def test_sweep_fans_out_over_workers(tmp_path):
     out = tmp_path / "run"
-    done = sfl("run", str(SCENARIOS / "analytic_sweep.yaml"), "--set", "modules.body.workers=2", "--out", str(out),
-               "--quiet")
+    done = sfl(
+        "run",
+        str(SCENARIOS / "analytic_sweep.yaml"),
+        "--set",
+        "modules.body.workers=2",
+        "--out",
+        str(out),
+        "--quiet",
+    )
     assert done.returncode == 0, done.stderr
     trials = [r for r in read_records(out) if r["kind"] == "trial"]
     assert sorted(r["trial"] for r in trials) == list(range(121))
@@ -194,3 +274,37 @@ def test_buslink_times_out_when_no_controller_answers():
     finally:
         link.close()
         session.close()
+
+
+def test_sfl_study_runs_every_combination_and_plots_success_against_vigilance(tmp_path):
+    out = tmp_path / "study"
+    done = sfl(
+        "study",
+        str(SCENARIOS / "analytic_learn.yaml"),
+        "--vary",
+        "modules.vigilance.params.value=0,-0.3",
+        "--seeds",
+        "0,1",
+        "--set",
+        "protocol.trials=30",
+        "--out",
+        str(out),
+        "--quiet",
+    )
+    assert done.returncode == 0, done.stderr
+    runs = sorted(p.name for p in out.iterdir() if (p / "scenario.yaml").exists())
+    assert runs == ["value-0.3_seed0", "value-0.3_seed1", "value0_seed0", "value0_seed1"]
+    assert json.loads((out / "value0_seed1" / "summary.json").read_text())["trials"] == 30
+    assert (out / "report" / "success_vs_vigilance.png").stat().st_size > 10_000
+    table = (out / "report" / "README.md").read_text()
+    assert "| -0.30 | 2 | 30 |" in table and "| +0.00 | 2 | 30 |" in table
+    # a bad combination is caught before anything runs
+    bad = sfl(
+        "study",
+        str(SCENARIOS / "analytic_learn.yaml"),
+        "--vary",
+        "modules.vigilance.params.valu=0,1",
+        "--out",
+        str(tmp_path / "bad"),
+    )
+    assert bad.returncode == 2 and "did you mean `value`" in bad.stderr and not (tmp_path / "bad").exists()

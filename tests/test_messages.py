@@ -19,10 +19,14 @@ def test_roundtrip_keeps_arrays_and_types():
     [
         (b"\xc1garbage", "not msgpack"),
         (b"\x93\x09\xa3ack\x91\xa0", "schema version 9"),
-        (msgpack.packb([m.SCHEMA_VERSION, "controller.sensors", [0, 1, msgpack.ExtType(1, b"\x02|O\x00")]]),
-         "object arrays"),
-        (msgpack.packb([m.SCHEMA_VERSION, "controller.sensors", [0, 1, msgpack.ExtType(1, b"\x03<f8\x01\x09")]]),
-         "not msgpack"),
+        (
+            msgpack.packb([m.SCHEMA_VERSION, "controller.sensors", [0, 1, msgpack.ExtType(1, b"\x02|O\x00")]]),
+            "object arrays",
+        ),
+        (
+            msgpack.packb([m.SCHEMA_VERSION, "controller.sensors", [0, 1, msgpack.ExtType(1, b"\x03<f8\x01\x09")]]),
+            "not msgpack",
+        ),
         (m.encode(m.Ack(detail="x")).replace(b"ack", b"zzz"), "unknown message tag 'zzz'"),
     ],
 )

@@ -19,9 +19,15 @@ from .test_e2e import rrd_rows, stable
 def trial(alpha, theta, slope=0.0, duration=10.0):
     body = PlanarBiped(PlanarBiped.Params(duration=duration))
     body.link = InProcessLink(ReflexController())
-    return body, body.handle(TrialRequest(trial_id=0, seed=0, body_params={"slope_deg": slope},
-                                          controller_params={"alpha_hip": alpha, "theta_hip_max_deg": theta},
-                                          log=False))
+    return body, body.handle(
+        TrialRequest(
+            trial_id=0,
+            seed=0,
+            body_params={"slope_deg": slope},
+            controller_params={"alpha_hip": alpha, "theta_hip_max_deg": theta},
+            log=False,
+        )
+    )
 
 
 def test_golden_structure():
@@ -61,15 +67,26 @@ def test_too_long_a_stride_stalls_and_is_not_a_success():
 
 
 def test_slope_changes_the_outcome():
-    outcomes = {s: [trial(a, t, slope=s)[1].success for a in (5, 10, 15) for t in (100, 110, 120, 130)]
-                for s in (-6.0, 0.0, 6.0)}
+    outcomes = {
+        s: [trial(a, t, slope=s)[1].success for a in (5, 10, 15) for t in (100, 110, 120, 130)]
+        for s in (-6.0, 0.0, 6.0)
+    }
     assert outcomes[-6.0] != outcomes[6.0]
 
 
 def test_learning_run_end_to_end_with_processes(tmp_path):
     out = tmp_path / "run"
-    done = sfl("run", str(SCENARIOS / "quickstart.yaml"), "--set", "protocol.trials=12", "--set",
-               "record.body_every=4", "--out", str(out), "--quiet")
+    done = sfl(
+        "run",
+        str(SCENARIOS / "quickstart.yaml"),
+        "--set",
+        "protocol.trials=12",
+        "--set",
+        "record.body_every=4",
+        "--out",
+        str(out),
+        "--quiet",
+    )
     assert done.returncode == 0, done.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["trials"] == 12 and summary["status"] == "completed"
@@ -80,4 +97,4 @@ def test_learning_run_end_to_end_with_processes(tmp_path):
     assert counts["/body/walker"] > 0 and counts["/body/joints/hip_l"] > 0 and counts["/body/motors/v_hip_l"] > 0
     assert counts["/trials/success"] == 12 and counts["/acc/success_map/neurons"] >= 12
     assert (out / "acc.npz").exists()
-    np.load(out / "acc.npz")["success_weights"].shape == (100, 2)
+    assert np.load(out / "acc.npz")["success_weights"].shape == (100, 2)

@@ -43,8 +43,14 @@ def test_success_rate_falls_with_vigilance_as_in_fig_3_13():
     for s_vig in (0.05, 0.0, -0.1, -0.2, -0.4):
         outcomes = []
         for seed in SEEDS:
-            trials, _ = learn([f"modules.vigilance.params.value={s_vig}", "protocol.trials=150",
-                               "protocol.max_decisions=20000"], seed)
+            trials, _ = learn(
+                [
+                    f"modules.vigilance.params.value={s_vig}",
+                    "protocol.trials=150",
+                    "protocol.max_decisions=20000",
+                ],
+                seed,
+            )
             outcomes += [t["success"] for t in trials]
         rates[s_vig] = float(np.mean(outcomes))
     # cautious zone well above the region's share of the square (0.28), risky zone near it
@@ -54,8 +60,7 @@ def test_success_rate_falls_with_vigilance_as_in_fig_3_13():
 
 
 def test_no_trial_well_above_and_every_sample_accepted_well_below():
-    _, decisions = learn(["modules.vigilance.params.value=0.6", "protocol.trials=5",
-                          "protocol.max_decisions=3000"], 0)
+    _, decisions = learn(["modules.vigilance.params.value=0.6", "protocol.trials=5", "protocol.max_decisions=3000"], 0)
     assert len(decisions) == 3000 and not any(d["go"] for d in decisions)
     trials, decisions = learn(["modules.vigilance.params.value=-1.0", "protocol.trials=100"], 0)
     assert len(trials) == 100 and len(decisions) == 100 and all(d["go"] for d in decisions)
@@ -79,8 +84,15 @@ def test_qarl_puts_success_neurons_where_eta_is_higher(tmp_path):
         means = []
         for enabled in ("true", "false"):
             run_dir = tmp_path / f"qarl-{seed}-{enabled}"
-            learn(["modules.vigilance.params.value=-0.1", "protocol.trials=300",
-                   f"modules.ofc.params.enabled={enabled}"], seed, run_dir)
+            learn(
+                [
+                    "modules.vigilance.params.value=-0.1",
+                    "protocol.trials=300",
+                    f"modules.ofc.params.enabled={enabled}",
+                ],
+                seed,
+                run_dir,
+            )
             with np.load(run_dir / "acc.npz") as maps:
                 means.append(eta(maps["success_weights"]).mean())
         ratios.append(means[0] / means[1])
@@ -90,8 +102,14 @@ def test_qarl_puts_success_neurons_where_eta_is_higher(tmp_path):
 def test_adaptive_vigilance_brings_ns_over_nf_toward_one_within_100_trials():
     blind = []
     for seed in SEEDS:
-        adaptive, _ = learn(["modules.vigilance.params.mode=adaptive", "modules.vigilance.params.value=0.0",
-                             "protocol.trials=100"], seed)
+        adaptive, _ = learn(
+            [
+                "modules.vigilance.params.mode=adaptive",
+                "modules.vigilance.params.value=0.0",
+                "protocol.trials=100",
+            ],
+            seed,
+        )
         accept_all, _ = learn(["modules.vigilance.params.value=-1.0", "protocol.trials=100"], seed)
         assert abs(math.log(adaptive[-1]["ns_nf"])) <= math.log(1.6), (seed, adaptive[-1]["ns_nf"])
         blind.append(accept_all[-1]["ns_nf"])
@@ -100,10 +118,12 @@ def test_adaptive_vigilance_brings_ns_over_nf_toward_one_within_100_trials():
 
 def test_batch_size_is_only_a_speed_knob():
     """Candidates are one seeded stream; how many ACC evaluates per request changes no record."""
+
     def stable(rows):
         return [{k: v for k, v in r.items() if k != "wall_ms"} for r in rows]
 
     one = run_local(load(SCENARIO, ["protocol.batch=1", "protocol.trials=80", "modules.vigilance.params.value=-0.1"]))
-    many = run_local(load(SCENARIO, ["protocol.batch=512", "protocol.trials=80",
-                                     "modules.vigilance.params.value=-0.1"]))
+    many = run_local(
+        load(SCENARIO, ["protocol.batch=512", "protocol.trials=80", "modules.vigilance.params.value=-0.1"])
+    )
     assert stable(one) == stable(many) and len(one) > 80

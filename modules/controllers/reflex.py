@@ -42,8 +42,13 @@ class ReflexParams(ModuleParams):
     theta_hip_max_deg: float = Field(120.0, ge=60, le=180, description="hip extensor threshold, deg (learnt)")
     theta_hip_min_deg: float = Field(70.0, ge=0, le=120, description="hip flexor sensor threshold, deg")
     alpha_hip_flexor: float = Field(10.0, ge=0, description="hip flexor sensor slope, 1/rad")
-    as_lead_deg: float = Field(5.0, ge=0, le=60, description="the stretch receptor AS fires this many degrees "
-                               "before the hip reaches theta_hip_max (RunBot: at the anterior extreme)")
+    as_lead_deg: float = Field(
+        5.0,
+        ge=0,
+        le=60,
+        description="the stretch receptor AS fires this many degrees "
+        "before the hip reaches theta_hip_max (RunBot: at the anterior extreme)",
+    )
     alpha_as: float = Field(20.0, ge=0, description="stretch receptor slope, 1/rad")
     theta_knee_extended_deg: float = Field(-3.0, description="knee extensor sensor threshold, deg")
     theta_knee_flexed_deg: float = Field(-60.0, description="knee flexor sensor threshold, deg")
@@ -76,8 +81,11 @@ class ReflexController(Controller):
         table = params.get("switching_table")
         self.table = None
         if table:
-            self.table = (np.asarray(table["condition"], float), np.asarray(table["alpha_hip"], float),
-                          np.asarray(table["theta_hip_max_deg"], float))
+            self.table = (
+                np.asarray(table["condition"], float),
+                np.asarray(table["alpha_hip"], float),
+                np.asarray(table["theta_hip_max_deg"], float),
+            )
         self.alpha_hip = float(params.get("alpha_hip", p.alpha_hip))
         self.theta_hip_max = math.radians(float(params.get("theta_hip_max_deg", p.theta_hip_max_deg)))
         # motor neuron states y: [hip EM, hip FM, knee EM, knee FM] x [left, right]
@@ -115,12 +123,14 @@ class ReflexController(Controller):
         knee_e = sensor_neuron(p.alpha_knee, math.radians(p.theta_knee_extended_deg), knee)
         knee_f = sensor_neuron(p.alpha_knee, -math.radians(p.theta_knee_flexed_deg), -knee)
         we, wi = p.w_excite, p.w_inhibit
-        drive = np.array([
-            we * g_other + wi * hip_e,                    # hip EM: (b), (c)
-            we * g_own + wi * hip_f,                      # hip FM: (a), (c)
-            we * g_own + we * stretch + wi * knee_e,      # knee EM: (a), (d), (c)
-            we * g_other + wi * stretch + wi * knee_f,    # knee FM: (b), (d), (c)
-        ])
+        drive = np.array(
+            [
+                we * g_other + wi * hip_e,  # hip EM: (b), (c)
+                we * g_own + wi * hip_f,  # hip FM: (a), (c)
+                we * g_own + we * stretch + wi * knee_e,  # knee EM: (a), (d), (c)
+                we * g_other + wi * stretch + wi * knee_f,  # knee FM: (b), (d), (c)
+            ]
+        )
         self.y += self.decay * (drive - self.y)  # (3.5)
         u = 1.0 / (1.0 + np.exp(p.alpha_motor * (p.theta_motor - self.y)))
         self.activity = u

@@ -1,0 +1,44 @@
+#!/usr/bin/env bash
+# Chapter 3 of the thesis, end to end: every run of E3.1-E3.5 into runs/, then one report in
+# docs/results/chapter3/. About 35 minutes on 2 cores (two chains run side by side).
+#   bash docs/experiments/chapter3.sh
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+OUT=${OUT:-runs/chapter3}
+mkdir -p "$OUT"
+
+# run once: a run folder whose summary says "completed" is kept (re-running the script resumes)
+once() {
+  local dir=$1; shift
+  if grep -qs '"status": "completed"' "$dir/summary.json"; then echo "kept $dir"; return; fi
+  rm -rf "$dir"
+  "$@" --out "$dir" --quiet
+}
+
+# E3.2 at s_vig 0.05 alone first, so that its wall time is measured on an idle machine
+once "$OUT/e3_2_s005" sfl run scenarios/e3_2_flat_s005.yaml
+
+chain_a() {
+  once "$OUT/e3_2_s0" sfl run scenarios/e3_2_flat_s0.yaml
+  once "$OUT/e3_2_s-0.1" sfl run scenarios/e3_2_flat_s01.yaml
+  once "$OUT/e3_2_s-0.2" sfl run scenarios/e3_2_flat_s02.yaml
+  sfl study scenarios/e3_2_flat_s0.yaml --vary modules.vigilance.params.value=0.1,0.05,0,-0.1 --seeds 11,12,13 \
+    --set protocol.trials=150 --set protocol.max_decisions=20000 --set record.body_every=0 \
+    --out "$OUT/e3_3a" --quiet
+}
+chain_b() {
+  once "$OUT/e3_1" sfl run scenarios/e3_1_viability.yaml
+  once "$OUT/e3_4_s0" sfl run scenarios/e3_4_slopes.yaml
+  once "$OUT/e3_4_s-0.2" sfl run scenarios/e3_4_slopes.yaml --set modules.vigilance.params.value=-0.2
+  once "$OUT/e3_5_exploit" sfl run scenarios/e3_5_terrain.yaml --set "protocol.maps=../$OUT/e3_4_s0/acc.npz"
+  once "$OUT/e3_5_fixed" sfl run scenarios/e3_5_fixed.yaml
+  sfl study scenarios/e3_2_flat_s0.yaml --vary modules.vigilance.params.value=-0.2,-0.3,-0.4,-0.5 --seeds 11,12,13 \
+    --set protocol.trials=150 --set protocol.max_decisions=20000 --set record.body_every=0 \
+    --out "$OUT/e3_3b" --quiet
+}
+chain_a & A=$!
+chain_b & B=$!
+wait $A
+wait $B
+sfl report "$OUT"/e3_1 "$OUT"/e3_2_* "$OUT"/e3_4_* "$OUT"/e3_5_* "$OUT"/e3_3a/value* "$OUT"/e3_3b/value* \
+  --out docs/results/chapter3
