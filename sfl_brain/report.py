@@ -21,8 +21,6 @@ import yaml  # noqa: E402
 
 from .records import read_records, summarise  # noqa: E402
 
-THESIS_E32 = {0.05: "98%", 0.0: "96%", -0.1: "45%", -0.2: "28%"}
-
 
 def _figure(run_dir: Path, out: Path, scenario: dict, rows: list[dict]) -> str:
     trials = [r for r in rows if r["kind"] == "trial" and r.get("v_unit")]
@@ -61,36 +59,47 @@ def _figure(run_dir: Path, out: Path, scenario: dict, rows: list[dict]) -> str:
     return path.name
 
 
-THESIS_E32_VALUES = {0.05: 0.98, 0.0: 0.96, -0.1: 0.45, -0.2: 0.28}
+#: the thesis's success rates by experiment (scenario names start with the experiment id)
+THESIS_RATES = {
+    "e3_2": {0.05: 0.98, 0.0: 0.96, -0.1: 0.45, -0.2: 0.28},  # §3.5.1, flat ground, 10x10 maps
+    "e3_4": {0.0: 0.86, -0.2: 0.15},  # §3.5.2, slopes, 5x5x5 maps
+}
 
 
-def _vigilance_figure(points: list[tuple[float, float, int]], out: Path) -> tuple[str, list[str]]:
-    """Success rate against fixed s_vig over runs (seeds); returns the PNG name and table lines."""
+def _thesis(name: str) -> dict[float, float]:
+    return next((rates for prefix, rates in THESIS_RATES.items() if name.startswith(prefix)), {})
+
+
+def _vigilance_figure(points: list[tuple[float, float, int]], out: Path, group: str, thesis: dict) -> list[str]:
+    """Success rate against fixed s_vig over the runs (seeds) of one parameter space; table lines."""
     values = sorted({v for v, _, _ in points})
     if len(values) < 2:
-        return "", []
+        return []
+    png = f"success_vs_vigilance_{group}.png"
+    axes = group.replace("-", ", ")
     fig, ax = plt.subplots(figsize=(5.5, 4))
     xs = np.array([v for v, _, _ in points])
     ys = np.array([r for _, r, _ in points])
     ax.scatter(xs, ys, s=14, c="tab:blue", alpha=0.6, label="one run (seed)")
     means = [float(np.mean(ys[xs == v])) for v in values]
     ax.plot(values, means, "-o", c="tab:blue", label="mean over seeds")
-    tv = sorted(THESIS_E32_VALUES)
-    ax.plot(tv, [THESIS_E32_VALUES[v] for v in tv], "kx", ms=8, label="thesis (§3.5.1)")
+    if thesis:
+        tv = sorted(thesis)
+        ax.plot(tv, [thesis[v] for v in tv], "kx", ms=8, label="thesis")
     ax.set_xlabel("vigilance threshold s_vig")
     ax.set_ylabel("rate of succeeded trials")
     ax.set_ylim(0, 1.02)
     ax.invert_xaxis()
     ax.legend(fontsize=7)
-    ax.set_title("success rate against vigilance (Fig. 3.13)")
+    ax.set_title(f"success rate against vigilance over ({axes})", fontsize=9)
     fig.tight_layout()
-    fig.savefig(out / "success_vs_vigilance.png", dpi=110)
+    fig.savefig(out / png, dpi=110)
     plt.close(fig)
     lines = [
         "",
-        "## Success rate against vigilance",
+        f"## Success rate against vigilance over ({axes})",
         "",
-        "![](success_vs_vigilance.png)",
+        f"![]({png})",
         "",
         "| s_vig | runs | trials (mean) | success rate, mean | min | max | thesis |",
         "|---|---|---|---|---|---|---|",
@@ -98,17 +107,17 @@ def _vigilance_figure(points: list[tuple[float, float, int]], out: Path) -> tupl
     for v, mean in zip(values, means, strict=True):
         rates = ys[xs == v]
         trials = np.mean([n for x, _, n in points if x == v])
-        thesis = THESIS_E32.get(v, "")
+        ref = f"{thesis[v]:.0%}" if v in thesis else ""
         lines.append(
-            f"| {v:+.2f} | {len(rates)} | {trials:.0f} | {mean:.1%} | {rates.min():.1%} | {rates.max():.1%} "
-            f"| {thesis} |"
+            f"| {v:+.2f} | {len(rates)} | {trials:.0f} | {mean:.1%} | {rates.min():.1%} | {rates.max():.1%} | {ref} |"
         )
-    return "success_vs_vigilance.png", lines
+    return lines
 
 
 def write_report(run_dirs: list[Path], out: Path) -> Path:
     out.mkdir(parents=True, exist_ok=True)
-    points: list[tuple[float, float, int]] = []
+    groups: dict[str, list[tuple[float, float, int]]] = {}
+    group_thesis: dict[str, dict] = {}
     lines = [
         "| run | protocol | s_vig | trials | success rate | thesis | figure |",
         "|---|---|---|---|---|---|---|",
@@ -119,17 +128,23 @@ def write_report(run_dirs: list[Path], out: Path) -> Path:
         summary = summarise(rows)
         vig = scenario.get("modules", {}).get("vigilance", {}).get("params", {})
         s_vig = vig.get("value") if vig.get("mode", "fixed") == "fixed" else vig.get("mode")
-        thesis = THESIS_E32.get(s_vig, "") if scenario["protocol"]["kind"] == "learn" else ""
+        learn = scenario["protocol"]["kind"] == "learn"
+        rates = _thesis(scenario["name"]) if learn else {}
+        thesis = f"{rates[s_vig]:.0%}" if isinstance(s_vig, int | float) and s_vig in rates else ""
         figure = _figure(run_dir, out, scenario, rows)
         rate = summary["success_rate"]
-        if scenario["protocol"]["kind"] == "learn" and isinstance(s_vig, int | float) and rate is not None:
-            points.append((float(s_vig), float(rate), int(summary["trials"])))
+        if learn and isinstance(s_vig, int | float) and rate is not None:
+            group = "-".join(a["name"] for a in scenario["space"])
+            groups.setdefault(group, []).append((float(s_vig), float(rate), int(summary["trials"])))
+            group_thesis[group] = rates if group_thesis.get(group, rates) == rates else {}
         lines.append(
             f"| {run_dir.name} | {scenario['protocol']['kind']} | {s_vig if s_vig is not None else '-'} | "
             f"{summary['trials']} | {'-' if rate is None else f'{rate:.1%}'} | {thesis} | "
             f"{f'![]({figure})' if figure else ''} |"
         )
-    _, vigilance_lines = _vigilance_figure(points, out)
+    vigilance_lines = []
+    for group, points in groups.items():
+        vigilance_lines += _vigilance_figure(points, out, group, group_thesis[group])
     path = out / "README.md"
     path.write_text("# Results\n\n" + "\n".join(lines + vigilance_lines) + "\n")
     (out / "summary.json").write_text(json.dumps({str(d): summarise(read_records(d)) for d in run_dirs}, indent=1))

@@ -295,7 +295,7 @@ def test_sfl_study_runs_every_combination_and_plots_success_against_vigilance(tm
     runs = sorted(p.name for p in out.iterdir() if (p / "scenario.yaml").exists())
     assert runs == ["value-0.3_seed0", "value-0.3_seed1", "value0_seed0", "value0_seed1"]
     assert json.loads((out / "value0_seed1" / "summary.json").read_text())["trials"] == 30
-    assert (out / "report" / "success_vs_vigilance.png").stat().st_size > 10_000
+    assert (out / "report" / "success_vs_vigilance_x-y.png").stat().st_size > 10_000
     table = (out / "report" / "README.md").read_text()
     assert "| -0.30 | 2 | 30 |" in table and "| +0.00 | 2 | 30 |" in table
     # a bad combination is caught before anything runs
