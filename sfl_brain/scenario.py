@@ -496,6 +496,11 @@ def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
             maps = base_dir / maps
         if not maps.exists():
             problems.append(Problem("protocol.maps", f"expected an ACC checkpoint file; {maps} does not exist"))
+        else:  # the module answering Exploit starts from these maps
+            exploit_by = providers.get(m.Exploit.TAG)
+            if exploit_by in classes and "restore" in classes[exploit_by][0].Params.model_fields:
+                cls_, ref_, params_ = classes[exploit_by]
+                classes[exploit_by] = (cls_, ref_, {**params_, "restore": str(maps.resolve())})
     if problems:
         raise ScenarioError(file, problems)
 

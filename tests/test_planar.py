@@ -98,3 +98,25 @@ def test_learning_run_end_to_end_with_processes(tmp_path):
     assert counts["/trials/success"] == 12 and counts["/acc/success_map/neurons"] >= 12
     assert (out / "acc.npz").exists()
     assert np.load(out / "acc.npz")["success_weights"].shape == (100, 2)
+
+
+def test_exploit_walks_with_the_parameters_of_the_given_maps(tmp_path):
+    """The exploit protocol restores the ACC from protocol.maps and switches its success neurons."""
+    from modules.acc import ACC
+
+    def maps_with(alpha_unit, theta_unit, path):
+        acc = ACC(ACC.Params(shape=(5, 5, 5), dim=3), seed=0)
+        acc.success_map.weights[:, 0] = alpha_unit
+        acc.success_map.weights[:, 1] = theta_unit
+        acc.checkpoint(path)
+        return path
+
+    walking = maps_with(0.9, 0.22, tmp_path / "walking.npz")  # alpha 18/rad, theta 103 deg: inside Fig. 3.8's region
+    stalling = maps_with(0.05, 0.9, tmp_path / "stalling.npz")  # alpha 1/rad, theta 144 deg: outside it
+    overrides = ["protocol.trials=1", "modules.body.params.duration=6", "modules.body.params.min_distance=2"]
+    plan = load(SCENARIOS / "e3_5_terrain.yaml", [*overrides, f"protocol.maps={walking}"])
+    assert next(i for i in plan.instances if i.name == "acc").params["restore"] == str(walking.resolve())
+    walked = run_local(plan)[-1]
+    stalled = run_local(load(SCENARIOS / "e3_5_terrain.yaml", [*overrides, f"protocol.maps={stalling}"]))[-1]
+    assert walked["success"] and walked["m_distance"] > 2.0
+    assert not stalled["success"] and stalled["m_distance"] < 1.0
