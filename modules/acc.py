@@ -147,28 +147,69 @@ class ACC(Module):
             self.checkpoint(msg.path)
         if self.recording is not None:
             self.log_maps()
+            self.flush_maps()
         return Ack(detail=f"pruned {removed.size} failure neurons: {removed.tolist()}")
 
     def _maps(self):
         return (("success", self.success_map), ("failure", self.failure_map))
 
     # --- observability ---------------------------------------------------------------------
+    #: map snapshots are sent to Rerun as columns, at most this many trials or seconds late
+    LOG_BATCH = 32
+    LOG_SECONDS = 0.5
+
     def log_maps(self) -> None:
-        """Both maps' weights and grid edges, on the ``trial`` timeline."""
+        """Snapshot both maps (weights, active flags) at this trial; sent in batches (see flush_maps)."""
+        import time
+
+        if not hasattr(self, "_snapshots"):
+            self._snapshots: list[tuple[int, dict]] = []
+            self._flushed = time.monotonic()
+        trial = self.success_map.samples + self.failure_map.samples
+        self._snapshots.append(
+            (trial, {name: (m.weights.copy(), m.active.copy(), m.segments()) for name, m in self._maps()})
+        )
+        if len(self._snapshots) >= self.LOG_BATCH or time.monotonic() - self._flushed > self.LOG_SECONDS:
+            self.flush_maps()
+
+    def flush_maps(self) -> None:
+        """Both maps' neurons and grid edges after every trial, on the ``trial`` timeline (one call per series)."""
+        import time
+
         import rerun as rr
 
-        rec = self.recording
-        rec.set_time("trial", sequence=self.success_map.samples + self.failure_map.samples)
+        snapshots, self._snapshots = getattr(self, "_snapshots", []), []
+        self._flushed = time.monotonic()
+        if not snapshots or self.recording is None:
+            return
+        index = [rr.TimeColumn("trial", sequence=np.array([t for t, _ in snapshots]))]
         colours = {"success": (40, 170, 60), "failure": (210, 50, 50)}
         for name, m in self._maps():
-            w = m.weights[:, :3]
-            points, strips = (rr.Points2D, rr.LineStrips2D) if w.shape[1] == 2 else (rr.Points3D, rr.LineStrips3D)
-            if w.shape[1] == 1:
-                w = np.column_stack([w, np.zeros(len(w))])
-                points, strips = rr.Points2D, rr.LineStrips2D
-            colour = np.where(m.active[:, None], colours[name], (150, 150, 150))
-            rec.log(f"{self.entity}/{name}_map/neurons", points(w, colors=colour, radii=0.008))
-            seg = m.segments()[:, :, :3]
-            if seg.shape[2] == 1:
-                seg = np.concatenate([seg, np.zeros_like(seg)], axis=2)
-            rec.log(f"{self.entity}/{name}_map/edges", strips(seg, colors=colours[name], radii=0.002))
+            weights = np.concatenate([snap[name][0] for _, snap in snapshots])[:, :3]
+            active = np.concatenate([snap[name][1] for _, snap in snapshots])
+            segments = np.concatenate([snap[name][2] for _, snap in snapshots])[:, :, :3]
+            if weights.shape[1] == 1:  # a 1-D map is drawn on a line
+                weights = np.column_stack([weights, np.zeros(len(weights))])
+                segments = np.concatenate([segments, np.zeros_like(segments)], axis=2)
+            points, strips = (rr.Points3D, rr.LineStrips3D) if weights.shape[1] == 3 else (rr.Points2D, rr.LineStrips2D)
+            colour = np.where(active[:, None], colours[name], (150, 150, 150)).astype(np.uint8)
+            self.recording.send_columns(
+                f"{self.entity}/{name}_map/neurons",
+                index,
+                points.columns(
+                    positions=weights, colors=colour, radii=np.full(len(weights), 0.008, np.float32)
+                ).partition([m.size] * len(snapshots)),
+            )
+            n_seg = len(segments) // len(snapshots)
+            self.recording.send_columns(
+                f"{self.entity}/{name}_map/edges",
+                index,
+                strips.columns(
+                    strips=segments,
+                    colors=np.tile(np.array(colours[name], np.uint8), (len(segments), 1)),
+                    radii=np.full(len(segments), 0.002, np.float32),
+                ).partition([n_seg] * len(snapshots)),
+            )
+
+    def close(self) -> None:
+        self.flush_maps()
