@@ -80,9 +80,12 @@ def _vigilance_figure(points: list[tuple[float, float, int]], out: Path, group: 
     fig, ax = plt.subplots(figsize=(5.5, 4))
     xs = np.array([v for v, _, _ in points])
     ys = np.array([r for _, r, _ in points])
-    ax.scatter(xs, ys, s=14, c="tab:blue", alpha=0.6, label="one run (seed)")
-    means = [float(np.mean(ys[xs == v])) for v in values]
-    ax.plot(values, means, "-o", c="tab:blue", label="mean over seeds")
+    none = np.isnan(ys)  # runs in which no candidate passed the early warning: no trial at all
+    ax.scatter(xs[~none], ys[~none], s=14, c="tab:blue", alpha=0.6, label="one run (seed)")
+    if none.any():
+        ax.scatter(xs[none], np.zeros(none.sum()), s=30, marker="v", c="grey", label="run with no trial (all no-go)")
+    means = [float(np.nanmean(ys[xs == v])) if (~np.isnan(ys[xs == v])).any() else float("nan") for v in values]
+    ax.plot(values, means, "-o", c="tab:blue", label="mean over seeds (runs with trials)")
     if thesis:
         tv = sorted(thesis)
         ax.plot(tv, [thesis[v] for v in tv], "kx", ms=8, label="thesis")
@@ -108,8 +111,12 @@ def _vigilance_figure(points: list[tuple[float, float, int]], out: Path, group: 
         rates = ys[xs == v]
         trials = np.mean([n for x, _, n in points if x == v])
         ref = f"{thesis[v]:.0%}" if v in thesis else ""
+        if np.isnan(rates).all():
+            lines.append(f"| {v:+.2f} | {len(rates)} | 0 | no trial | - | - | {ref} |")
+            continue
         lines.append(
-            f"| {v:+.2f} | {len(rates)} | {trials:.0f} | {mean:.1%} | {rates.min():.1%} | {rates.max():.1%} | {ref} |"
+            f"| {v:+.2f} | {len(rates)} | {trials:.0f} | {mean:.1%} | {np.nanmin(rates):.1%} | {np.nanmax(rates):.1%} "
+            f"| {ref} |"
         )
     return lines
 
@@ -133,9 +140,11 @@ def write_report(run_dirs: list[Path], out: Path) -> Path:
         thesis = f"{rates[s_vig]:.0%}" if isinstance(s_vig, int | float) and s_vig in rates else ""
         figure = _figure(run_dir, out, scenario, rows)
         rate = summary["success_rate"]
-        if learn and isinstance(s_vig, int | float) and rate is not None:
+        if learn and isinstance(s_vig, int | float):
             group = "-".join(a["name"] for a in scenario["space"])
-            groups.setdefault(group, []).append((float(s_vig), float(rate), int(summary["trials"])))
+            groups.setdefault(group, []).append(
+                (float(s_vig), float("nan") if rate is None else float(rate), int(summary["trials"]))
+            )
             group_thesis[group] = rates if group_thesis.get(group, rates) == rates else {}
         lines.append(
             f"| {run_dir.name} | {scenario['protocol']['kind']} | {s_vig if s_vig is not None else '-'} | "

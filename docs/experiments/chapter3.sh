@@ -22,7 +22,7 @@ chain_a() {
   once "$OUT/e3_2_s0" sfl run scenarios/e3_2_flat_s0.yaml
   once "$OUT/e3_2_s-0.1" sfl run scenarios/e3_2_flat_s01.yaml
   once "$OUT/e3_2_s-0.2" sfl run scenarios/e3_2_flat_s02.yaml
-  sfl study scenarios/e3_2_flat_s0.yaml --vary modules.vigilance.params.value=0.1,0.05,0,-0.1 --seeds 11,12,13 \
+  sfl study scenarios/e3_2_flat_s0.yaml --vary modules.vigilance.params.value=0.3,0.2,0.1,0.05,0,-0.1 --seeds 11,12,13 \
     --set protocol.trials=150 --set protocol.max_decisions=20000 --set record.body_every=0 \
     --out "$OUT/e3_3a" --quiet
 }
