@@ -120,7 +120,7 @@ def study(scenario, vary, seeds, overrides, out, quiet) -> None:
             name += "" if seed is None else f"_seed{seed}"
             runs.append((name, _load_or_exit(scenario, sets, seed)))
     click.echo(f"sfl: study of {len(runs)} runs into {out}")
-    done = []
+    done, failed = [], []
     for i, (name, plan) in enumerate(runs, 1):
         view = ProgressView(plan, enabled=not quiet)
         click.echo(f"sfl: [{i}/{len(runs)}] {name}")
@@ -132,8 +132,13 @@ def study(scenario, vary, seeds, overrides, out, quiet) -> None:
         if summary["status"] == "interrupted":
             sys.exit(130)
         done.append(run_dir)
+        if summary["status"] == "failed":
+            failed.append(name)
     path = write_report(done, out / "report")
     click.echo(f"sfl: report written to {path}")
+    if failed:
+        click.echo(f"sfl: {len(failed)} of {len(runs)} runs failed: {', '.join(failed)}", err=True)
+        sys.exit(1)
 
 
 @main.command("list")
