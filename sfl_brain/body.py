@@ -106,6 +106,9 @@ class Body(Module):
                     params=request.controller_params,
                     sensors=list(self.SENSORS),
                     commands=list(self.COMMANDS),
+                    log=self.logging,
+                    t0=request.trial_id * self.params.duration,
+                    dt=self.params.control_dt,
                 )
             )
             tick = 0
@@ -147,10 +150,17 @@ class Controller(Module):
     COMMANDS: ClassVar[tuple[str, ...]] = ()
     #: learnt parameters a trial may set (checked by ``sfl check``)
     TRIAL_PARAMS: ClassVar[tuple[str, ...]] = ()
+    #: names of the neuron activities :meth:`neurons` returns (logged to Rerun on logged trials)
+    NEURONS: ClassVar[tuple[str, ...]] = ()
+    _neuron_log = None
 
     def configure(self, params: dict, seed: int) -> None:
         """Start of a trial: take the learnt parameters, reset the neurons."""
         raise NotImplementedError
+
+    def neurons(self) -> np.ndarray:
+        """Activities of ``NEURONS`` after the last step (only called on logged trials)."""
+        return np.empty(0)
 
     def step(self, sensors: np.ndarray) -> np.ndarray:
         """One control tick: sensor values (``REQUIRED_SENSORS`` order) -> ``COMMANDS`` values."""
@@ -165,10 +175,34 @@ class Controller(Module):
             raise ValueError(f"{type(self).__name__} commands {self.COMMANDS}; body expects {msg.commands}")
         self._sensor_index = np.array([msg.sensors.index(s) for s in self.REQUIRED_SENSORS], dtype=int)
         self._trial_id = msg.trial_id
+        self.flush_neurons()  # the previous logged trial, if any
+        self._neuron_log = ([], msg.trial_id, msg.t0, msg.dt) if msg.log and self.NEURONS and self.recording else None
         self.configure(dict(msg.params), msg.seed)
         return Ack()
 
     @on(SensorFrame)
     def on_sensor_frame(self, frame: SensorFrame) -> MotorCommand:
         values = self.step(frame.values[self._sensor_index])
+        if self._neuron_log is not None:
+            self._neuron_log[0].append(self.neurons())
         return MotorCommand(trial_id=frame.trial_id, tick=frame.tick, values=values)
+
+    def flush_neurons(self) -> None:
+        """Send a logged trial's neuron activities as scalar columns on ``sim_time`` and ``trial``."""
+        log_, self._neuron_log = getattr(self, "_neuron_log", None), None
+        if not log_ or not log_[0]:
+            return
+        import rerun as rr
+
+        rows, trial_id, t0, dt = log_
+        trace = np.stack(rows)
+        n = len(trace)
+        index = [
+            rr.TimeColumn("sim_time", duration=t0 + dt * np.arange(1, n + 1)),
+            rr.TimeColumn("trial", sequence=np.full(n, trial_id)),
+        ]
+        for j, name in enumerate(self.NEURONS):
+            self.recording.send_columns(f"{self.entity}/neurons/{name}", index, rr.Scalars.columns(scalars=trace[:, j]))
+
+    def close(self) -> None:
+        self.flush_neurons()

@@ -336,6 +336,11 @@ class ControllerReset(Message):
     params: dict
     sensors: list
     commands: list
+    #: log this trial's neuron activities (the body logs its motion on the same trial)
+    log: bool = False
+    #: sim_time of tick 0 and the control tick, s (to place the activities on the ``sim_time`` timeline)
+    t0: float = 0.0
+    dt: float = 0.01
 
 
 @message("controller.sensors", stream=True)

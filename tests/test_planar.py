@@ -95,6 +95,9 @@ def test_learning_run_end_to_end_with_processes(tmp_path):
     assert stable(local) == stable(read_records(out))
     counts = rrd_rows(out / "recording.rrd")
     assert counts["/body/walker"] > 0 and counts["/body/joints/hip_l"] > 0 and counts["/body/motors/v_hip_l"] > 0
+    # the controller process logged its neurons on the same logged trials, on the same timelines
+    assert counts["/controller/neurons/motor/hip_EM_l"] == counts["/body/joints/hip_l"]
+    assert counts["/controller/neurons/sensor/stretch_AS_r"] == counts["/body/joints/hip_l"]
     assert counts["/trials/success"] == 12 and counts["/acc/success_map/neurons"] >= 12
     assert (out / "acc.npz").exists()
     assert np.load(out / "acc.npz")["success_weights"].shape == (100, 2)

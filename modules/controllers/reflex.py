@@ -75,6 +75,17 @@ class ReflexController(Controller):
     REQUIRED_SENSORS = SENSORS
     COMMANDS = ("v_hip_l", "v_hip_r", "v_knee_l", "v_knee_r")
     TRIAL_PARAMS = ("alpha_hip", "theta_hip_max_deg", "switching_table")
+    #: sensor neurons (3.4), motor neurons (3.5) and ground contacts, per leg, logged on logged trials
+    NEURONS = tuple(
+        f"{kind}/{name}_{side}"
+        for kind, names in (
+            ("sensor", ("hip_extensor", "hip_flexor", "stretch_AS", "knee_extensor", "knee_flexor")),
+            ("motor", ("hip_EM", "hip_FM", "knee_EM", "knee_FM")),
+            ("contact", ("G",)),
+        )
+        for name in names
+        for side in ("l", "r")
+    )
 
     def configure(self, params: dict, seed: int) -> None:
         p = self.params
@@ -131,9 +142,14 @@ class ReflexController(Controller):
                 we * g_other + wi * stretch + wi * knee_f,  # knee FM: (b), (d), (c)
             ]
         )
+        self._sensor_neurons = (hip_e, hip_f, stretch, knee_e, knee_f, g_own)
         self.y += self.decay * (drive - self.y)  # (3.5)
         u = 1.0 / (1.0 + np.exp(p.alpha_motor * (p.theta_motor - self.y)))
         self.activity = u
         v_hip = p.m_hip * (u[0] - u[1])  # (3.6), G_E = 1, G_F = -1
         v_knee = p.m_knee * (u[2] - u[3])
         return np.array([v_hip[0], v_hip[1], v_knee[0], v_knee[1]])
+
+    def neurons(self) -> np.ndarray:
+        hip_e, hip_f, stretch, knee_e, knee_f, g_own = self._sensor_neurons
+        return np.concatenate([hip_e, hip_f, stretch, knee_e, knee_f, self.activity.ravel(), g_own])
