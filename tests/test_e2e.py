@@ -221,6 +221,26 @@ def test_ctrl_c_stops_every_child_and_keeps_records(tmp_path):
     assert json.loads((out / "summary.json").read_text())["status"] == "interrupted"
 
 
+def test_kill_9_of_the_supervisor_loses_at_most_the_trial_in_flight(tmp_path):
+    out = tmp_path / "run"
+    proc = _start(
+        [str(SCENARIOS / "quickstart.yaml"), "--set", "protocol.trials=100000", "--out", str(out), "--quiet"],
+        tmp_path,
+    )
+    records = out / "records.jsonl"
+    assert _wait_for(lambda: records.exists() and records.read_text().count('"kind":"trial"') >= 3, 120)
+    children = psutil.Process(proc.pid).children(recursive=True)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=10)
+    written = records.read_text().count('"kind":"trial"')
+    # the module processes notice their parent is gone (stdin closes) and exit on their own
+    gone, alive = psutil.wait_procs(children, timeout=10)
+    assert not alive, f"orphans after kill -9: {alive}"
+    summary = json.loads(sfl("inspect", str(out), "--json").stdout)
+    assert summary["trials"] >= 3 and summary["trials"] in (written, written - 1)  # a torn last line is skipped
+    assert not (out / "summary.json").exists()  # nothing claimed the run finished
+
+
 def test_user_module_from_a_file_is_swapped_in(tmp_path):
     """The README's example: a brain module in one short file, named by path in a scenario."""
     out = tmp_path / "run"
