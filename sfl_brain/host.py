@@ -136,11 +136,20 @@ def make_recording(run_id: str, rrd: str | None, viewer: str | None):
     import rerun as rr
 
     rec = rr.RecordingStream("sfl-brain", recording_id=run_id)
-    if viewer:
+    attach_sinks(rec, rrd, viewer)
+    return rec
+
+
+def attach_sinks(rec, rrd: str | None, viewer: str | None) -> None:
+    """Send a recording to the run folder's file, to a live viewer, or to both at once."""
+    import rerun as rr
+
+    if viewer and rrd:
+        rec.set_sinks(rr.GrpcSink(viewer), rr.FileSink(rrd))
+    elif viewer:
         rec.connect_grpc(viewer)
     else:
         rec.save(rrd)
-    return rec
 
 
 class Host:

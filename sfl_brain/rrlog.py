@@ -44,11 +44,10 @@ class RerunLog:
     """The supervisor's own recording stream (same recording id as every module's)."""
 
     def __init__(self, run_id: str, rrd: str | None, viewer: str | None, axes: list[str]) -> None:
+        from .host import attach_sinks
+
         self.rec = rr.RecordingStream("sfl-brain", recording_id=run_id)
-        if viewer:
-            self.rec.connect_grpc(viewer)
-        else:
-            self.rec.save(rrd)
+        attach_sinks(self.rec, rrd, viewer)
         self.rec.send_blueprint(blueprint())
         self.axes = axes
         self._decisions: list[dict] = []

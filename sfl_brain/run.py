@@ -95,7 +95,7 @@ def run(
     (run_dir / "rerun").mkdir(exist_ok=True)
     rr_log = RerunLog(
         run_id,
-        None if viewer_url else str(run_dir / "rerun" / "_supervisor.rrd"),
+        str(run_dir / "rerun" / "_supervisor.rrd"),  # also saved when streaming to a viewer
         viewer_url,
         [a.name for a in plan.scenario.space],
     )
@@ -117,8 +117,7 @@ def run(
         sup.stop()
         writer.close()
         rr_log.close()
-        if viewer_proc is None:
-            merge_recordings(run_dir)
+        merge_recordings(run_dir)
     summary = summarise(read_records(run_dir), time.perf_counter() - started)
     summary.update(
         status=status,

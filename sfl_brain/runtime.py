@@ -145,7 +145,7 @@ class Supervisor:
             "routes": inst.routes,
             "listen": ["tcp/127.0.0.1:0"] if self.endpoint else self.listen_for_children(),
             "connect": [self.endpoint] if self.endpoint else self.listen,
-            "rrd": str(self.run_dir / "rerun" / f"{inst.name}.rrd") if self.record and not self.viewer else None,
+            "rrd": str(self.run_dir / "rerun" / f"{inst.name}.rrd") if self.record else None,
             "viewer": self.viewer,
             "realtime": self.realtime,
             "tick_timeout": self.plan.scenario.timeouts.trial,

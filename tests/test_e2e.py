@@ -241,6 +241,47 @@ def test_kill_9_of_the_supervisor_loses_at_most_the_trial_in_flight(tmp_path):
     assert not (out / "summary.json").exists()  # nothing claimed the run finished
 
 
+@pytest.mark.filterwarnings("ignore:RRD file has no footer")  # the server's --save writes no footer
+def test_viewer_url_streams_live_and_the_run_folder_keeps_the_recording(tmp_path):
+    """A headless Rerun server on loopback stands in for the viewer; it saves what it receives."""
+    import shutil
+    import socket
+
+    port = int(bus.free_endpoint().rsplit(":", 1)[1])
+    live = tmp_path / "live.rrd"
+    server = subprocess.Popen(
+        [shutil.which("rerun") or "rerun", "--bind", "127.0.0.1", "--port", str(port), "--save", str(live)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+
+        def listening():
+            with socket.socket() as s:
+                return s.connect_ex(("127.0.0.1", port)) == 0
+
+        assert _wait_for(listening, 30)
+        out = tmp_path / "run"
+        done = sfl(
+            "run",
+            str(SCENARIOS / "analytic_learn.yaml"),
+            "--set",
+            "protocol.trials=25",
+            "--viewer-url",
+            f"rerun+http://127.0.0.1:{port}/proxy",
+            "--out",
+            str(out),
+            "--quiet",
+        )
+        assert done.returncode == 0, done.stderr
+    finally:
+        server.send_signal(signal.SIGINT)
+        server.wait(timeout=20)
+    saved, streamed = rrd_rows(out / "recording.rrd"), rrd_rows(live)
+    for counts in (saved, streamed):
+        assert counts["/trials/success"] == 25 and counts["/acc/success_map/neurons"] >= 25
+
+
 def test_user_module_from_a_file_is_swapped_in(tmp_path):
     """The README's example: a brain module in one short file, named by path in a scenario."""
     out = tmp_path / "run"
