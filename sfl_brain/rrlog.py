@@ -2,8 +2,10 @@
 
 Entity paths (every process logs into the same recording id):
 
-* ``decisions/margin`` (d_f - d_s), ``decisions/s_vig``, ``decisions/go`` on the ``decision`` timeline;
-* ``trials/*`` (success rate, N_s/N_f, eta, rho, outcome), ``vigilance/*`` (s_vig and band) and
+* ``decisions/margin`` (d_f - d_s), ``decisions/d_success``, ``decisions/d_failure``, ``decisions/s_vig``,
+  ``decisions/go`` and ``decisions/v_unit/<axis>``, ``decisions/v/<axis>`` on the ``decision`` timeline;
+* ``trials/*`` (success rate, N_s, N_f, N_s/N_f, eta, rho, outcome, v per axis), ``vigilance/*`` (s_vig
+  and band) and
   ``omega/trials`` (the tried point, green success / red failure) on the ``trial`` timeline;
 * ``acc/success_map``, ``acc/failure_map``: the maps (logged by the ACC process);
 * ``body/...``: the body's motion on ``sim_time`` (logged by the body workers);
@@ -88,9 +90,15 @@ class RerunLog:
         index = [rr.TimeColumn("decision", sequence=np.array([r["decision"] for r in rows]))]
         columns = {
             "decisions/margin": [r["d_failure"] - r["d_success"] for r in rows],
+            "decisions/d_success": [r["d_success"] for r in rows],
+            "decisions/d_failure": [r["d_failure"] for r in rows],
             "decisions/s_vig": [r["s_vig"] for r in rows],
             "decisions/go": [float(r["go"]) for r in rows],
         }
+        for j, axis in enumerate(self.axes):  # v, in the unit space and in the axis's own units
+            columns[f"decisions/v_unit/{axis}"] = [r["v_unit"][j] for r in rows]
+            if all(axis in r for r in rows):
+                columns[f"decisions/v/{axis}"] = [r[axis] for r in rows]
         for path, values in columns.items():
             self.rec.send_columns(path, index, rr.Scalars.columns(scalars=np.array(values, dtype=float)))
 
@@ -117,6 +125,9 @@ class RerunLog:
             ("trials/quality", "quality"),
             ("trials/rho", "rho"),
             ("trials/ns_nf", "ns_nf"),
+            ("trials/n_success", "n_success"),
+            ("trials/n_failure", "n_failure"),
+            *((f"trials/v/{axis}", axis) for axis in self.axes),
             ("vigilance/s_vig", "s_vig"),
             ("vigilance/band_low", "band_low"),
             ("vigilance/band_high", "band_high"),

@@ -56,7 +56,11 @@ def test_learn_run_records_everything_and_matches_in_process(tmp_path):
     # every decision and every trial is in the Rerun recording, logged by the processes
     counts = rrd_rows(out / "recording.rrd")
     assert counts["/decisions/margin"] == len(decisions)
+    for series in ("d_success", "d_failure", "s_vig", "go", "v_unit/x", "v/y"):
+        assert counts[f"/decisions/{series}"] == len(decisions), series
     assert counts["/trials/success"] == 60
+    for series in ("n_success", "n_failure", "quality", "v/x"):
+        assert counts[f"/trials/{series}"] == 60, series
     assert counts["/acc/success_map/neurons"] >= 60  # the ACC process logged its maps per trial
     # same scenario and seed in one process: identical records
     local = run_local(load(SCENARIOS / "analytic_learn.yaml", ["protocol.trials=60"]))
