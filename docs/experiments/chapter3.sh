@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Chapter 3 of the thesis, end to end: every run of E3.1-E3.5 into runs/, then one report in
-# docs/results/chapter3/. About 35 minutes on 2 cores (two chains run side by side).
+# docs/results/chapter3/. About 25 minutes on 2 cores (two chains run side by side).
 #   bash docs/experiments/chapter3.sh
 set -euo pipefail
 cd "$(dirname "$0")/../.."
