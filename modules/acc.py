@@ -8,6 +8,7 @@ vetoes it unless d_f - d_s > s_vig.
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import numpy as np
@@ -51,6 +52,8 @@ class ACC(Module):
         self.failure_map = SelfOrganisingMap(p, dim, failure_rng)
         if p.restore:
             self.restore(p.restore)
+        self._snapshots: list[tuple[int, dict]] = []  # map states not yet sent to Rerun
+        self._flushed = time.monotonic()
 
     # --- evaluation and decision -------------------------------------------------
     def evaluate(self, candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -160,11 +163,6 @@ class ACC(Module):
 
     def log_maps(self) -> None:
         """Snapshot both maps (weights, active flags) at this trial; sent in batches (see flush_maps)."""
-        import time
-
-        if not hasattr(self, "_snapshots"):
-            self._snapshots: list[tuple[int, dict]] = []
-            self._flushed = time.monotonic()
         trial = self.success_map.samples + self.failure_map.samples
         self._snapshots.append(
             (trial, {name: (m.weights.copy(), m.active.copy(), m.segments()) for name, m in self._maps()})
@@ -174,11 +172,9 @@ class ACC(Module):
 
     def flush_maps(self) -> None:
         """Both maps' neurons and grid edges after every trial, on the ``trial`` timeline (one call per series)."""
-        import time
-
         import rerun as rr
 
-        snapshots, self._snapshots = getattr(self, "_snapshots", []), []
+        snapshots, self._snapshots = self._snapshots, []
         self._flushed = time.monotonic()
         if not snapshots or self.recording is None:
             return
