@@ -189,6 +189,7 @@ def inspect(run_dir: Path, as_json: bool) -> None:
 def worker(scenario, connect, run_id, name, overrides) -> None:
     """Serve trials for a running run: a body worker with its controller in this process."""
     from .host import main as host_main
+    from .runtime import hosted_spec
     from .scenario import instance_seed
 
     plan = _load_or_exit(scenario, overrides)
@@ -208,14 +209,7 @@ def worker(scenario, connect, run_id, name, overrides) -> None:
         "viewer": None,
         "tick_timeout": plan.scenario.timeouts.trial,
         "watch_stdin": False,
-        "colocated": None
-        if ctrl is None
-        else {
-            "reference": ctrl.reference,
-            "params": ctrl.params,
-            "seed": ctrl.seed,
-            "spec_name": ctrl.spec_name,
-        },
+        "colocated": hosted_spec(ctrl),
     }
     click.echo(f"sfl: worker {spec['instance']} joining run {run_id} via {', '.join(connect)}")
     sys.exit(host_main([json.dumps(spec)]))

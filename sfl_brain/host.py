@@ -59,6 +59,7 @@ class BusLink:
         self.subscriber = session.declare_subscriber(self.command_key, zenoh.handlers.RingChannel(64))
         self._waiting_since: float | None = None
         self._expired = False
+        self._stopping = False
         self._closed = threading.Event()
         self._watchdog = threading.Thread(target=self._watch, name="buslink-watchdog", daemon=True)
         self._watchdog.start()
@@ -71,7 +72,18 @@ class BusLink:
                 self._expired = True
                 self.session.put(self.command_key, b"")  # wakes the body's recv()
 
+    def interrupt(self) -> None:
+        """Make a waiting (or the next) tick raise LinkError: the host is stopping."""
+        self._stopping = True
+        if not self._closed.is_set():
+            try:
+                self.session.put(self.command_key, b"")  # wakes the body's recv()
+            except Exception:  # the session is already closing: nothing waits any more
+                pass
+
     def reset(self, msg: ControllerReset) -> None:
+        if self._stopping:
+            raise LinkError("interrupted: the body worker is stopping")
         while self.subscriber.try_recv() is not None:  # drop stale commands and wake-ups
             pass
         request(self.session, self.reset_key, msg, self.timeout)
@@ -83,6 +95,8 @@ class BusLink:
         try:
             while True:
                 data = self.subscriber.recv().payload.to_bytes()
+                if self._stopping:
+                    raise LinkError("interrupted: the body worker is stopping")
                 if self._expired:
                     raise LinkError(f"interrupted: no command for tick {frame.tick} within {self.timeout:g} s")
                 if not data:
@@ -162,6 +176,13 @@ class Host:
         self._lock = threading.Lock()  # the module sees one message at a time
         self._stopping = False
 
+    def stop(self) -> None:
+        """Leave the main loop; a trial in progress is interrupted at its next tick (from any thread)."""
+        self.inbox.put(STOP)
+        link = getattr(self, "link", None)
+        if link is not None:
+            link.interrupt()
+
     # callbacks only enqueue; the main loop does the work
     def _enqueue(self, item) -> None:
         self.inbox.put(item)
@@ -198,7 +219,7 @@ class Host:
                         spec["routes"][SensorFrame.TAG],
                         spec["tick_timeout"],
                     )
-                    self.module.link = link
+                    self.module.link = self.link = link
             for message_type in type(self.module).handles:
                 key_expr = bus.key(self.run_id, self.instance, message_type.TAG)
                 if message_type.STREAM:  # one thread blocks in recv(): no Python handoff per tick
@@ -297,14 +318,19 @@ class Host:
             publisher.put(encode(reply))
 
 
-def _watch_parent(inbox: queue.SimpleQueue) -> None:
+def _watch_parent(host: Host) -> None:
     """Stop when the parent closes our stdin (it exited, even by kill -9)."""
     try:
         while sys.stdin.buffer.read(1024):
             pass
     except (OSError, ValueError):
         pass
-    inbox.put(STOP)
+    host.stop()
+
+
+def _on_signal(host: Host, wake_r: int) -> None:
+    while os.read(wake_r, 1):
+        host.stop()
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -316,10 +342,16 @@ def main(argv: list[str] | None = None) -> int:
         stream=sys.stderr,
     )
     host = Host(spec)
-    signal.signal(signal.SIGTERM, lambda *_: host.inbox.put(STOP))
+    # SIGTERM: the main thread may sit in a trial (blocked in Rust), where Python handlers do not run;
+    # the C handler writes to a wakeup fd, and a thread that reads it stops the host at once
+    wake_r, wake_w = os.pipe()
+    os.set_blocking(wake_w, False)
+    signal.set_wakeup_fd(wake_w)
+    signal.signal(signal.SIGTERM, lambda *_: None)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the supervisor's to handle
+    threading.Thread(target=_on_signal, args=(host, wake_r), daemon=True).start()
     if spec.get("watch_stdin", True):
-        threading.Thread(target=_watch_parent, args=(host.inbox,), daemon=True).start()
+        threading.Thread(target=_watch_parent, args=(host,), daemon=True).start()
     try:
         host.serve()
     except Exception:

@@ -65,6 +65,13 @@ class Conductor:
     def call(self, message: m.Message) -> m.Message:
         return self.sup.call(self.providers[message.TAG], message)
 
+    def record_trial(self, progress: Progress, row: dict) -> None:
+        """One trial row: to the records, to Rerun, and to whoever shows progress."""
+        self.writer.write(row)
+        self.rr.trial(row)
+        progress.last = row
+        self.on_progress(progress)
+
     def call_all(self, *messages: m.Message) -> list[m.Message]:
         """Send independent requests at once (to different modules) and wait for every reply."""
         timeout = self.plan.scenario.timeouts.request
@@ -248,10 +255,7 @@ def run_learn(c: Conductor) -> dict:
             **c.physical_row(v),
             **{f"m_{k}": val for k, val in result.metrics.items()},
         }
-        c.writer.write(row)
-        c.rr.trial(row)
-        progress.last = row
-        c.on_progress(progress)
+        c.record_trial(progress, row)
     finish: m.Ack = c.call(m.Finish(path=str(c.run_dir / "acc.npz"), prune=proto.prune_failure_map))
     return {"stop_reason": stop_reason, "acc": finish.detail}
 
@@ -283,10 +287,7 @@ def run_sweep(c: Conductor) -> dict:
             **c.physical_row(unit),
             **{f"m_{k}": val for k, val in result.metrics.items()},
         }
-        c.writer.write(row)
-        c.rr.trial(row)
-        progress.last = row
-        c.on_progress(progress)
+        c.record_trial(progress, row)
     return {"grid_points": len(points)}
 
 
@@ -330,10 +331,7 @@ def run_exploit(c: Conductor) -> dict:
             "success_rate": progress.successes / progress.trials,
             **{f"m_{k}": val for k, val in result.metrics.items()},
         }
-        c.writer.write(row)
-        c.rr.trial(row)
-        progress.last = row
-        c.on_progress(progress)
+        c.record_trial(progress, row)
     return {"switching_table_size": len(conditions)}
 
 

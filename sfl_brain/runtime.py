@@ -81,6 +81,13 @@ def _exits_soon(proc: subprocess.Popen, grace: float = 1.0) -> bool:
         return False
 
 
+def hosted_spec(inst: Instance | None) -> dict | None:
+    """How a host builds a module it runs in-process (a controller colocated with its body)."""
+    if inst is None:
+        return None
+    return {"reference": inst.reference, "params": inst.params, "seed": inst.seed, "spec_name": inst.spec_name}
+
+
 class Supervisor:
     def __init__(
         self,
@@ -149,14 +156,7 @@ class Supervisor:
             "viewer": self.viewer,
             "realtime": self.realtime,
             "tick_timeout": self.plan.scenario.timeouts.trial,
-            "colocated": None
-            if colocated is None
-            else {
-                "reference": colocated.reference,
-                "params": colocated.params,
-                "seed": colocated.seed,
-                "spec_name": colocated.spec_name,
-            },
+            "colocated": hosted_spec(colocated),
         }
         return spec
 

@@ -204,15 +204,20 @@ def test_garbage_on_the_bus_is_logged_and_dropped(tmp_path):
     assert "dropped malformed request" in (out / "logs" / "acc.log").read_text()
 
 
-def test_ctrl_c_stops_every_child_and_keeps_records(tmp_path):
+def _long_walker_run(tmp_path, trials_seen):
+    """``sfl run`` of the walker with an endless budget, once ``trials_seen`` trials are recorded."""
     out = tmp_path / "run"
     proc = _start(
         [str(SCENARIOS / "quickstart.yaml"), "--set", "protocol.trials=100000", "--out", str(out), "--quiet"],
         tmp_path,
     )
     records = out / "records.jsonl"
-    assert _wait_for(lambda: records.exists() and records.read_text().count('"kind":"trial"') >= 2, 120)
-    children = psutil.Process(proc.pid).children(recursive=True)
+    assert _wait_for(lambda: records.exists() and records.read_text().count('"kind":"trial"') >= trials_seen, 120)
+    return proc, out, records, psutil.Process(proc.pid).children(recursive=True)
+
+
+def test_ctrl_c_stops_every_child_and_keeps_records(tmp_path):
+    proc, out, _, children = _long_walker_run(tmp_path, 2)
     assert len(children) == 5
     started = time.monotonic()
     proc.send_signal(signal.SIGINT)
@@ -226,14 +231,7 @@ def test_ctrl_c_stops_every_child_and_keeps_records(tmp_path):
 
 
 def test_kill_9_of_the_supervisor_loses_at_most_the_trial_in_flight(tmp_path):
-    out = tmp_path / "run"
-    proc = _start(
-        [str(SCENARIOS / "quickstart.yaml"), "--set", "protocol.trials=100000", "--out", str(out), "--quiet"],
-        tmp_path,
-    )
-    records = out / "records.jsonl"
-    assert _wait_for(lambda: records.exists() and records.read_text().count('"kind":"trial"') >= 3, 120)
-    children = psutil.Process(proc.pid).children(recursive=True)
+    proc, out, records, children = _long_walker_run(tmp_path, 3)
     proc.send_signal(signal.SIGKILL)
     proc.wait(timeout=10)
     written = records.read_text().count('"kind":"trial"')
