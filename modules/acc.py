@@ -165,7 +165,7 @@ class ACC(Module):
         """Snapshot both maps (weights, active flags) at this trial; sent in batches (see flush_maps)."""
         trial = self.success_map.samples + self.failure_map.samples
         self._snapshots.append(
-            (trial, {name: (m.weights.copy(), m.active.copy(), m.segments()) for name, m in self._maps()})
+            (trial, {name: (m.weights.copy(), m.active.copy()) for name, m in self._maps()})
         )
         if len(self._snapshots) >= self.LOG_BATCH or time.monotonic() - self._flushed > self.LOG_SECONDS:
             self.flush_maps()
@@ -183,7 +183,8 @@ class ACC(Module):
         for name, m in self._maps():
             weights = np.concatenate([snap[name][0] for _, snap in snapshots])[:, :3]
             active = np.concatenate([snap[name][1] for _, snap in snapshots])
-            segments = np.concatenate([snap[name][2] for _, snap in snapshots])[:, :, :3]
+            stack = np.stack([snap[name][0] for _, snap in snapshots])
+            segments = m.segments(stack).reshape(-1, 2, m.dim)[:, :, :3]
             if weights.shape[1] == 1:  # a 1-D map is drawn on a line
                 weights = np.column_stack([weights, np.zeros(len(weights))])
                 segments = np.concatenate([segments, np.zeros_like(segments)], axis=2)

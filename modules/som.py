@@ -98,20 +98,17 @@ class SelfOrganisingMap:
         self.samples += 1
         return float(np.einsum("ij,ij->", delta, delta))
 
-    def edges(self) -> list[np.ndarray]:
-        """Polylines joining grid neighbours, for drawing the map as a mesh."""
-        w = self.weights.reshape(*self.shape, self.dim)
-        lines = []
-        for axis in range(len(self.shape)):
-            moved = np.moveaxis(w, axis, -2).reshape(-1, self.shape[axis], self.dim)
-            lines.extend(moved)
-        return lines
+    def segments(self, weights: np.ndarray | None = None) -> np.ndarray:
+        """Every grid edge as a segment, shape (..., edges, 2, dim): the mesh in one array (fast to log).
 
-    def segments(self) -> np.ndarray:
-        """Every grid edge as a segment, shape (edges, 2, dim): the mesh in one array (fast to log)."""
-        w = self.weights.reshape(*self.shape, self.dim)
+        ``weights`` defaults to this map's; a stack of snapshots, shape (k, size, dim), gives k meshes.
+        """
+        w = self.weights if weights is None else weights
+        lead = w.shape[:-2]
+        w = w.reshape(*lead, *self.shape, self.dim)
         parts = []
         for axis in range(len(self.shape)):
-            moved = np.moveaxis(w, axis, 0)
-            parts.append(np.stack([moved[:-1], moved[1:]], axis=-2).reshape(-1, 2, self.dim))
-        return np.concatenate(parts)
+            moved = np.moveaxis(w, len(lead) + axis, -2)  # (..., other axes, this axis, dim)
+            pairs = np.stack([moved[..., :-1, :], moved[..., 1:, :]], axis=-2)
+            parts.append(pairs.reshape(*lead, -1, 2, self.dim))
+        return np.concatenate(parts, axis=-3)

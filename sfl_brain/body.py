@@ -189,7 +189,7 @@ class Controller(Module):
 
     def flush_neurons(self) -> None:
         """Send a logged trial's neuron activities as scalar columns on ``sim_time`` and ``trial``."""
-        log_, self._neuron_log = getattr(self, "_neuron_log", None), None
+        log_, self._neuron_log = self._neuron_log, None
         if not log_ or not log_[0]:
             return
         import rerun as rr

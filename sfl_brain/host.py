@@ -58,28 +58,32 @@ class BusLink:
         self.publisher = session.declare_publisher(bus.key(run_id, controller, SensorFrame.TAG))
         self.subscriber = session.declare_subscriber(self.command_key, zenoh.handlers.RingChannel(64))
         self._waiting_since: float | None = None
-        self._expired = False
+        self._abort: str | None = None  # why the waiting tick must end (overdue command, stopping)
         self._stopping = False
         self._closed = threading.Event()
         self._watchdog = threading.Thread(target=self._watch, name="buslink-watchdog", daemon=True)
         self._watchdog.start()
 
+    def _wake(self, reason: str) -> None:
+        """End the waiting tick with LinkError(reason, ``{tick}`` filled in); an empty payload wakes recv()."""
+        self._abort = reason
+        if not self._closed.is_set():
+            try:
+                self.session.put(self.command_key, b"")
+            except Exception:  # the session is already closing: nothing waits any more
+                pass
+
     def _watch(self) -> None:
         period = min(max(self.timeout / 4, 0.01), 1.0)
         while not self._closed.wait(period):
             since = self._waiting_since
-            if since is not None and time.monotonic() - since > self.timeout and not self._expired:
-                self._expired = True
-                self.session.put(self.command_key, b"")  # wakes the body's recv()
+            if since is not None and time.monotonic() - since > self.timeout and self._abort is None:
+                self._wake(f"no command for tick {{tick}} within {self.timeout:g} s")
 
     def interrupt(self) -> None:
         """Make a waiting (or the next) tick raise LinkError: the host is stopping."""
         self._stopping = True
-        if not self._closed.is_set():
-            try:
-                self.session.put(self.command_key, b"")  # wakes the body's recv()
-            except Exception:  # the session is already closing: nothing waits any more
-                pass
+        self._wake("the body worker is stopping")
 
     def reset(self, msg: ControllerReset) -> None:
         if self._stopping:
@@ -89,16 +93,15 @@ class BusLink:
         request(self.session, self.reset_key, msg, self.timeout)
 
     def step(self, frame: SensorFrame) -> MotorCommand:
-        self._expired = False
+        if not self._stopping:
+            self._abort = None
         self._waiting_since = time.monotonic()
         self.publisher.put(encode(frame))
         try:
             while True:
                 data = self.subscriber.recv().payload.to_bytes()
-                if self._stopping:
-                    raise LinkError("interrupted: the body worker is stopping")
-                if self._expired:
-                    raise LinkError(f"interrupted: no command for tick {frame.tick} within {self.timeout:g} s")
+                if self._abort is not None:
+                    raise LinkError("interrupted: " + self._abort.format(tick=frame.tick))
                 if not data:
                     continue  # a late wake-up from an earlier tick
                 try:
@@ -175,13 +178,13 @@ class Host:
         self._publishers: dict[str, Any] = {}
         self._lock = threading.Lock()  # the module sees one message at a time
         self._stopping = False
+        self.link: BusLink | None = None  # a body's link to its controller in another process
 
     def stop(self) -> None:
         """Leave the main loop; a trial in progress is interrupted at its next tick (from any thread)."""
         self.inbox.put(STOP)
-        link = getattr(self, "link", None)
-        if link is not None:
-            link.interrupt()
+        if self.link is not None:
+            self.link.interrupt()
 
     # callbacks only enqueue; the main loop does the work
     def _enqueue(self, item) -> None:
@@ -196,7 +199,6 @@ class Host:
         self.session = bus.open_session(spec["listen"], spec["connect"])
         declared = []
         streams: list[tuple[str, Any, threading.Thread]] = []
-        link = None
         rec = None
         try:
             rec = make_recording(self.run_id, spec.get("rrd"), spec.get("viewer"))
@@ -212,14 +214,14 @@ class Host:
                     controller.recording = rec
                     self.module.link = InProcessLink(controller)
                 elif self.module.COMMANDS:
-                    link = BusLink(
+                    self.link = BusLink(
                         self.session,
                         self.run_id,
                         self.instance,
                         spec["routes"][SensorFrame.TAG],
                         spec["tick_timeout"],
                     )
-                    self.module.link = self.link = link
+                    self.module.link = self.link
             for message_type in type(self.module).handles:
                 key_expr = bus.key(self.run_id, self.instance, message_type.TAG)
                 if message_type.STREAM:  # one thread blocks in recv(): no Python handoff per tick
@@ -248,8 +250,8 @@ class Host:
                     subscriber.undeclare()
             for d in declared:
                 d.undeclare()
-            if link is not None:
-                link.close()
+            if self.link is not None:
+                self.link.close()
             for p in self._publishers.values():
                 p.undeclare()
             self.module.close()

@@ -56,9 +56,6 @@ class LocalSupervisor:
         module.run_deferred()
         return reply
 
-    def call(self, target: str, message: Message, timeout: float | None = None) -> Message:
-        return self._deliver(target, message)
-
     def submit(self, target: str, message: Message, timeout: float) -> int:
         token = self._next
         self._next += 1

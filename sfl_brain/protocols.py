@@ -63,7 +63,7 @@ class Conductor:
         self.providers = plan.providers
 
     def call(self, message: m.Message) -> m.Message:
-        return self.sup.call(self.providers[message.TAG], message)
+        return self.call_all(message)[0]
 
     def record_trial(self, progress: Progress, row: dict) -> None:
         """One trial row: to the records, to Rerun, and to whoever shows progress."""
@@ -163,6 +163,7 @@ def run_learn(c: Conductor) -> dict:
     pool = np.empty((0, dim))
     batch = min(8, proto.batch)
     go_window: deque[int] = deque(maxlen=20)  # decisions per go, recent trials: sizes the next batch
+    last_go = -1  # index of the last go decision
     while progress.trials < proto.trials:
         if decision >= proto.max_decisions:
             stop_reason = f"max_decisions ({proto.max_decisions}) reached"
@@ -206,10 +207,12 @@ def run_learn(c: Conductor) -> dict:
             c.writer.write_many(rows)
         c.rr.decisions(rows)
         progress.decisions = decision
-        if chosen is not None:
-            go_window.append(decision - (progress.last.get("decision", -1) + 1))
-        per_go = max(go_window) if go_window else used
-        batch = int(min(proto.batch, max(4, 2 * per_go if chosen is not None else 2 * batch)))
+        if chosen is None:  # no go in the whole batch: look further ahead next time
+            batch = min(proto.batch, 2 * batch)
+        else:
+            go_window.append(decision - 1 - last_go)
+            last_go = decision - 1
+            batch = min(proto.batch, max(4, 2 * max(go_window)))
         if rejected_update is not None:
             threshold = c.call(m.Rejected(consecutive=rejected_update))
             continue

@@ -355,15 +355,6 @@ class Supervisor:
                 return []
             self._handle(self._next_event(0.5 if remaining is None else min(0.5, remaining)))
 
-    def call(self, target: str, message: Message, timeout: float | None = None) -> Message:
-        """Request/reply with a brain module; raise :class:`RunError` if it fails or dies."""
-        timeout = timeout or self.plan.scenario.timeouts.request
-        token = self.submit(target, message, timeout)
-        ((_, result),) = self.wait_any([token])
-        if isinstance(result, Exception):
-            raise RunError(str(result)) from None
-        return result
-
     def wait_alive(self, name: str) -> None:
         deadline = time.monotonic() + self.plan.scenario.timeouts.ready
         child = self.children[name]

@@ -160,3 +160,18 @@ def test_ofc_params_are_validated():
         OFC.Params(rho_min=3.0, rho_max=2.5)
     with pytest.raises(ValueError, match="finite"):
         OFC(seed=0).reward(float("nan"))
+
+
+@pytest.mark.parametrize("shape, dim", [((10, 10), 2), ((5, 5, 5), 3), ((4, 6), 2), ((7,), 1)])
+def test_segments_join_exactly_the_grid_neighbours(shape, dim):
+    s = SelfOrganisingMap(SOMParams(shape=shape), dim, np.random.default_rng(0))
+    index = np.arange(s.size).reshape(shape)
+    expected = []
+    for axis, n in enumerate(shape):
+        lo = np.take(index, range(n - 1), axis=axis).ravel()
+        hi = np.take(index, range(1, n), axis=axis).ravel()
+        expected += [np.stack([s.weights[i], s.weights[j]]) for i, j in zip(lo, hi, strict=True)]
+    segments = s.segments()
+    assert sorted(e.tobytes() for e in expected) == sorted(g.tobytes() for g in segments)
+    stacked = s.segments(np.stack([s.weights, s.weights + 1.0]))  # snapshots, as ACC logs them
+    np.testing.assert_array_equal(stacked[1], segments + 1.0)
