@@ -22,6 +22,12 @@ def sfl(*args: str, timeout: float = 300, **kw) -> subprocess.CompletedProcess:
     )
 
 
+def sfl_run(scenario, out, *sets: str, extra: tuple[str, ...] = (), **kw) -> subprocess.CompletedProcess:
+    """``sfl run SCENARIO --set S... --out OUT --quiet`` with any ``extra`` options."""
+    settings = [arg for s in sets for arg in ("--set", s)]
+    return sfl("run", str(scenario), *settings, *extra, "--out", str(out), "--quiet", **kw)
+
+
 @pytest.fixture
 def write_scenario(tmp_path):
     def write(text: str, name: str = "scenario.yaml") -> Path:

@@ -18,7 +18,7 @@ from sfl_brain.local import run_local
 from sfl_brain.records import read_records
 from sfl_brain.scenario import load
 
-from .conftest import ROOT, SCENARIOS, sfl
+from .conftest import ROOT, SCENARIOS, sfl, sfl_run
 
 VOLATILE = {"wall_ms", "worker"}
 
@@ -36,15 +36,7 @@ def rrd_rows(path):
 
 def test_learn_run_records_everything_and_matches_in_process(tmp_path):
     out = tmp_path / "run"
-    done = sfl(
-        "run",
-        str(SCENARIOS / "analytic_learn.yaml"),
-        "--set",
-        "protocol.trials=60",
-        "--out",
-        str(out),
-        "--quiet",
-    )
+    done = sfl_run(SCENARIOS / "analytic_learn.yaml", out, "protocol.trials=60")
     assert done.returncode == 0, done.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "completed" and summary["trials"] == 60
@@ -102,20 +94,13 @@ def test_sfl_list_names_every_registered_implementation():
 def test_crashed_body_is_restarted_and_its_trial_retried(tmp_path):
     marker = tmp_path / "crashed"
     out = tmp_path / "run"
-    done = sfl(
-        "run",
-        str(SCENARIOS / "analytic_learn.yaml"),
-        "--set",
+    done = sfl_run(
+        SCENARIOS / "analytic_learn.yaml",
+        out,
         "protocol.trials=20",
-        "--set",
         "modules.body.params.crash_at_trial=5",
-        "--set",
         f"modules.body.params.crash_marker={marker}",
-        "--set",
         "modules.body.restart=on-failure",
-        "--out",
-        str(out),
-        "--quiet",
     )
     assert done.returncode == 0, done.stderr
     assert marker.exists()
@@ -128,17 +113,7 @@ def test_crashed_body_is_restarted_and_its_trial_retried(tmp_path):
 
 def test_dead_module_without_restart_is_reported_and_records_survive(tmp_path):
     out = tmp_path / "run"
-    done = sfl(
-        "run",
-        str(SCENARIOS / "analytic_learn.yaml"),
-        "--set",
-        "protocol.trials=20",
-        "--set",
-        "modules.body.params.crash_at_trial=5",
-        "--out",
-        str(out),
-        "--quiet",
-    )
+    done = sfl_run(SCENARIOS / "analytic_learn.yaml", out, "protocol.trials=20", "modules.body.params.crash_at_trial=5")
     assert done.returncode == 1
     assert "module `body`" in done.stderr and "died with exit code 3" in done.stderr
     assert "Traceback" not in done.stderr.split("its log")[0]
@@ -171,7 +146,7 @@ def test_garbage_on_the_bus_is_logged_and_dropped(tmp_path):
     out = tmp_path / "run"
     proc = _start(
         [
-            str(SCENARIOS / "analytic_learn.yaml"),
+            SCENARIOS / "analytic_learn.yaml",
             "--set",
             "protocol.trials=3000",
             "--listen",
@@ -264,16 +239,14 @@ def test_viewer_url_streams_live_and_the_run_folder_keeps_the_recording(tmp_path
 
         assert _wait_for(listening, 30)
         out = tmp_path / "run"
-        done = sfl(
-            "run",
-            str(SCENARIOS / "analytic_learn.yaml"),
-            "--set",
+        done = sfl_run(
+            SCENARIOS / "analytic_learn.yaml",
+            out,
             "protocol.trials=25",
-            "--viewer-url",
-            f"rerun+http://127.0.0.1:{port}/proxy",
-            "--out",
-            str(out),
-            "--quiet",
+            extra=(
+                "--viewer-url",
+                f"rerun+http://127.0.0.1:{port}/proxy",
+            ),
         )
         assert done.returncode == 0, done.stderr
     finally:
@@ -287,15 +260,7 @@ def test_viewer_url_streams_live_and_the_run_folder_keeps_the_recording(tmp_path
 def test_user_module_from_a_file_is_swapped_in(tmp_path):
     """The README's example: a brain module in one short file, named by path in a scenario."""
     out = tmp_path / "run"
-    done = sfl(
-        "run",
-        str(ROOT / "docs" / "examples" / "cautious.yaml"),
-        "--set",
-        "protocol.trials=30",
-        "--out",
-        str(out),
-        "--quiet",
-    )
+    done = sfl_run(ROOT / "docs" / "examples" / "cautious.yaml", out, "protocol.trials=30")
     assert done.returncode == 0, done.stderr
     trials = [r for r in read_records(out) if r["kind"] == "trial"]
     assert len(trials) == 30
@@ -307,15 +272,7 @@ def test_user_module_from_a_file_is_swapped_in(tmp_path):
 @pytest.mark.skipif(os.cpu_count() < 2, reason="needs two cores")
 def test_sweep_fans_out_over_workers(tmp_path):
     out = tmp_path / "run"
-    done = sfl(
-        "run",
-        str(SCENARIOS / "analytic_sweep.yaml"),
-        "--set",
-        "modules.body.workers=2",
-        "--out",
-        str(out),
-        "--quiet",
-    )
+    done = sfl_run(SCENARIOS / "analytic_sweep.yaml", out, "modules.body.workers=2")
     assert done.returncode == 0, done.stderr
     trials = [r for r in read_records(out) if r["kind"] == "trial"]
     assert sorted(r["trial"] for r in trials) == list(range(121))
@@ -343,7 +300,7 @@ def test_sfl_study_runs_every_combination_and_plots_success_against_vigilance(tm
     out = tmp_path / "study"
     done = sfl(
         "study",
-        str(SCENARIOS / "analytic_learn.yaml"),
+        SCENARIOS / "analytic_learn.yaml",
         "--vary",
         "modules.vigilance.params.value=0,-0.3",
         "--seeds",
@@ -364,7 +321,7 @@ def test_sfl_study_runs_every_combination_and_plots_success_against_vigilance(tm
     # a bad combination is caught before anything runs
     bad = sfl(
         "study",
-        str(SCENARIOS / "analytic_learn.yaml"),
+        SCENARIOS / "analytic_learn.yaml",
         "--vary",
         "modules.vigilance.params.valu=0,1",
         "--out",

@@ -12,7 +12,7 @@ from sfl_brain.messages import TrialRequest
 from sfl_brain.records import read_records
 from sfl_brain.scenario import load
 
-from .conftest import SCENARIOS, sfl
+from .conftest import SCENARIOS, sfl_run
 from .test_e2e import rrd_rows, stable
 
 
@@ -76,17 +76,7 @@ def test_slope_changes_the_outcome():
 
 def test_learning_run_end_to_end_with_processes(tmp_path):
     out = tmp_path / "run"
-    done = sfl(
-        "run",
-        str(SCENARIOS / "quickstart.yaml"),
-        "--set",
-        "protocol.trials=12",
-        "--set",
-        "record.body_every=4",
-        "--out",
-        str(out),
-        "--quiet",
-    )
+    done = sfl_run(SCENARIOS / "quickstart.yaml", out, "protocol.trials=12", "record.body_every=4")
     assert done.returncode == 0, done.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["trials"] == 12 and summary["status"] == "completed"
