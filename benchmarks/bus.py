@@ -3,7 +3,11 @@
     python benchmarks/bus.py [--ticks 5000]
 
 (raw) a bare Zenoh pub/sub ping-pong between two processes (100-byte payload), both sides
-    blocking in a ring channel's recv() (the fastest bare pattern on this machine);
+    blocking in a ring channel's recv() (the fastest bare pattern on this machine): the
+    baseline of the goal;
+(example) the same ping-pong as zenoh-python's own z_ping.py / z_pong.py examples (the pong
+    answers in a subscriber callback, the ping waits on the default FIFO channel), the usual
+    pattern of a "raw Zenoh Python round trip", shown for reference;
 (framework) the body's BusLink to a controller hosted by ``sfl_brain.host`` in another process:
     a SensorFrame out, a MotorCommand back, typed, encoded, dispatched (the open-loop controller);
     raw and framework run in interleaved blocks so that both see the same machine load;
@@ -46,19 +50,42 @@ PONG = textwrap.dedent("""
         pub.put(smp.payload)
     s.close()
 """)
+# zenoh-python's examples/z_pong.py, on its own keys
+PONG_EXAMPLE = textwrap.dedent("""
+    import sys, threading, zenoh
+    sys.path.insert(0, {root!r})
+    from sfl_brain import bus
+    s = bus.open_session(["tcp/127.0.0.1:0"], [sys.argv[1]])
+    done = threading.Event()
+    pub = s.declare_publisher("bench/ex/pong", congestion_control=zenoh.CongestionControl.BLOCK)
+    def pong(smp):
+        if smp.payload.to_bytes() == b"stop": done.set()
+        else: pub.put(smp.payload)
+    s.declare_subscriber("bench/ex/ping", pong)
+    tok = s.liveliness().declare_token("bench/ex/pong")
+    done.wait()
+    s.close()
+""")
 SENSORS = ["hip_l", "hip_r", "knee_l", "knee_r", "contact_l", "contact_r", "slope", "pitch"]
 COMMANDS = ["v_hip_l", "v_hip_r", "v_knee_l", "v_knee_r"]
 
 
 class Raw:
-    """The fastest bare pattern found on this machine: both sides block in a ring channel's recv()."""
+    """A bare ping-pong. Default: the fastest pattern found on this machine, both sides blocking in
+    a ring channel's recv(). ``example``: zenoh-python's z_ping/z_pong (callback pong, FIFO ping)."""
 
-    def __init__(self, session, endpoint):
+    def __init__(self, session, endpoint, example=False):
         root = str(Path(__file__).resolve().parents[1])
-        self.proc = subprocess.Popen([sys.executable, "-c", PONG.format(root=root), endpoint])
-        wait_alive(session, "bench/pong")
-        self.pub = session.declare_publisher("bench/ping")
-        self.sub = session.declare_subscriber("bench/pong", zenoh.handlers.RingChannel(64))
+        prefix = "bench/ex" if example else "bench"
+        script = (PONG_EXAMPLE if example else PONG).format(root=root)
+        self.proc = subprocess.Popen([sys.executable, "-c", script, endpoint])
+        wait_alive(session, f"{prefix}/pong")
+        if example:
+            self.pub = session.declare_publisher(f"{prefix}/ping", congestion_control=zenoh.CongestionControl.BLOCK)
+            self.sub = session.declare_subscriber(f"{prefix}/pong")
+        else:
+            self.pub = session.declare_publisher(f"{prefix}/ping")
+            self.sub = session.declare_subscriber(f"{prefix}/pong", zenoh.handlers.RingChannel(64))
         self.payload = b"x" * 100
 
     def block(self, ticks):
@@ -149,28 +176,32 @@ def main() -> None:
     args = parser.parse_args()
     endpoint = bus.free_endpoint()
     session = bus.open_session([endpoint], [])
-    raw = framework = None
+    raw = example = framework = None
     try:
-        raw, framework = Raw(session, endpoint), Framework(session, endpoint)
-        raw.block(300), framework.block(300)  # warm up both
-        raw_t, framework_t = [], []
+        raw, example = Raw(session, endpoint), Raw(session, endpoint, example=True)
+        framework = Framework(session, endpoint)
+        raw.block(300), example.block(300), framework.block(300)  # warm up all three
+        raw_t, example_t, framework_t = [], [], []
         block = max(args.ticks // 10, 1)
-        for _ in range(10):  # interleaved blocks, so that both see the same machine load
+        for _ in range(10):  # interleaved blocks, so that all see the same machine load
             raw_t += raw.block(block)
+            example_t += example.block(block)
             framework_t += framework.block(block)
     finally:
-        for side in (raw, framework):
+        for side in (raw, example, framework):
             if side is not None:
                 side.close()
         session.close()
     local = in_process_round_trips(args.ticks)
     print(f"lockstep round trip per tick, {args.ticks} ticks")
     print(f"  raw zenoh pub/sub (2 processes)     {stats(raw_t)}")
+    print(f"  zenoh's z_ping/z_pong (2 processes) {stats(example_t)}")
     print(f"  sfl BusLink <-> host (2 processes)  {stats(framework_t)}")
     print(f"  sfl InProcessLink (1 process)       {stats(local)}")
     ratio = np.median(framework_t) / np.median(raw_t)
     added = (np.median(framework_t) - np.median(raw_t)) * 1e6
     print(f"  framework / raw (medians): {ratio:.2f}  (goal <= 1.20); the framework adds {added:.1f} us per tick")
+    print(f"  framework / z_ping-z_pong (medians): {np.median(framework_t) / np.median(example_t):.2f}")
     s = startup()
     print(
         f"sfl run start-up, 5 module processes: ready {np.median(s[:, 0]):.2f} s, first trial done "

@@ -164,9 +164,7 @@ class ACC(Module):
     def log_maps(self) -> None:
         """Snapshot both maps (weights, active flags) at this trial; sent in batches (see flush_maps)."""
         trial = self.success_map.samples + self.failure_map.samples
-        self._snapshots.append(
-            (trial, {name: (m.weights.copy(), m.active.copy()) for name, m in self._maps()})
-        )
+        self._snapshots.append((trial, {name: (m.weights.copy(), m.active.copy()) for name, m in self._maps()}))
         if len(self._snapshots) >= self.LOG_BATCH or time.monotonic() - self._flushed > self.LOG_SECONDS:
             self.flush_maps()
 

@@ -17,7 +17,14 @@ def test_roundtrip_keeps_arrays_and_types():
 @pytest.mark.parametrize(
     "payload, text",
     [
-        (b"\xc1garbage", "not msgpack"),
+        (b"\xc0\xc1garbage", "not msgpack"),
+        (b"\xc1garbage", "schema version 103"),
+        (b"\xc1", "schema version None"),
+        (m.encode(m.SensorFrame(trial_id=1, tick=2, values=np.zeros(3)))[:-3], "does not fit its layout"),
+        (
+            m.encode(m.SensorFrame(trial_id=1, tick=2, values=np.zeros(3))).replace(b"controller", b"kontroller"),
+            "unknown packed message tag",
+        ),
         (b"\x93\x09\xa3ack\x91\xa0", "schema version 9"),
         (
             msgpack.packb([m.SCHEMA_VERSION, "controller.sensors", [0, 1, msgpack.ExtType(1, b"\x02|O\x00")]]),
@@ -33,6 +40,21 @@ def test_roundtrip_keeps_arrays_and_types():
 def test_malformed_payloads_raise_message_error(payload, text):
     with pytest.raises(m.MessageError, match=text):
         m.decode(payload)
+
+
+def test_packed_stream_messages_roundtrip_and_fall_back_for_other_arrays():
+    frame = m.SensorFrame(trial_id=3, tick=-7, values=np.array([0.5, -1.0, np.inf]))
+    data = m.encode(frame)
+    assert data[0] == 0xC1 and len(data) == 3 + len("controller.sensors") + 16 + 24
+    back = m.decode(data)
+    assert (back.trial_id, back.tick) == (3, -7) and back.values.dtype == np.float64
+    np.testing.assert_array_equal(back.values, frame.values)
+    # not a float64 vector: the general layout carries it unchanged
+    for values in (np.arange(4, dtype=np.int32), np.zeros((2, 2))):
+        data = m.encode(m.MotorCommand(trial_id=0, tick=1, values=values))
+        assert data[0] != 0xC1
+        back = m.decode(data)
+        assert back.values.dtype == values.dtype and back.values.shape == values.shape
 
 
 def test_wrong_field_type_is_rejected():

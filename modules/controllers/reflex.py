@@ -63,8 +63,17 @@ class ReflexParams(ModuleParams):
     control_dt: float = Field(0.01, gt=0, description="tick length, s (must match the body)")
 
 
-def sensor_neuron(alpha: float, theta: float, phi):
-    """rho = (1 + exp(alpha (theta - phi)))^-1   (3.4)"""
+# sensor-neuron inputs phi = sign * sensor (hips 0-1, knees 2-3), in the order of the sensor vector
+_PHI = np.array([0, 1, 0, 1, 0, 1, 2, 3, 2, 3])
+_SIGN = np.array([1.0, 1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0])
+_T2 = np.array([0, 1, 2, 3, 4, 5, 4, 5])  # hip E -> hip EM, hip F -> hip FM, AS -> knee EM and FM
+_T3 = np.array([0, 1, 0, 1, 6, 7, 8, 9])  # knee E -> knee EM, knee F -> knee FM (weights 0 at the hips)
+_EM = np.array([0, 1, 4, 5])
+_FM = np.array([2, 3, 6, 7])
+
+
+def sensor_neuron(alpha, theta, phi):
+    """rho = (1 + exp(alpha (theta - phi)))^-1   (3.4), elementwise"""
     return 1.0 / (1.0 + np.exp(alpha * (theta - phi)))
 
 
@@ -97,59 +106,74 @@ class ReflexController(Controller):
                 np.asarray(table["alpha_hip"], float),
                 np.asarray(table["theta_hip_max_deg"], float),
             )
-        self.alpha_hip = float(params.get("alpha_hip", p.alpha_hip))
-        self.theta_hip_max = math.radians(float(params.get("theta_hip_max_deg", p.theta_hip_max_deg)))
-        # motor neuron states y: [hip EM, hip FM, knee EM, knee FM] x [left, right]
-        self.y = np.zeros((4, 2))
+        self._entry = -1  # the switching table's entry in force
+        # The ten sensor neurons (3.4) in one vector, [left, right] per kind, in NEURONS order:
+        # hip extensor E, hip flexor F, stretch receptor AS, knee extensor E, knee flexor F.
+        # rho = sensor_neuron(alpha, theta, sign * sensors[_PHI])
+        self._alpha = np.repeat([0.0, p.alpha_hip_flexor, p.alpha_as, p.alpha_knee, p.alpha_knee], 2)
+        self._theta = np.repeat(
+            [
+                0.0,
+                -math.radians(p.theta_hip_min_deg),
+                0.0,
+                math.radians(p.theta_knee_extended_deg),
+                -math.radians(p.theta_knee_flexed_deg),
+            ],
+            2,
+        )
+        self._set_hip_extensor(
+            float(params.get("alpha_hip", p.alpha_hip)),
+            math.radians(float(params.get("theta_hip_max_deg", p.theta_hip_max_deg))),
+        )
+        # motor neurons (3.5): [hip EM, hip FM, knee EM, knee FM] x [left, right], drive = (T1 + T2) + T3
+        we, wi = p.w_excite, p.w_inhibit
+        self._w2 = np.repeat([wi, wi, we, wi], 2)  # T2: hip E, hip F, AS, AS
+        self._w3 = np.repeat([0.0, 0.0, wi, wi], 2)  # T3: -, -, knee E, knee F
+        # T1, the ground-contact term, for each state of the stance: none, left, right
+        own = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+        g = np.concatenate([own[:, ::-1], own, own, own[:, ::-1]], axis=1)  # (b), (a), (a), (b)
+        self._t1 = we * g
+        self._g_own = own
+        self._m = np.repeat([p.m_hip, p.m_knee], 2)
+        self.y = np.zeros(8)
         self.decay = 1.0 - math.exp(-p.control_dt / p.tau)  # exact integration of (3.5) over one tick
-        self.activity = np.zeros((4, 2))
+        self.activity = np.zeros(8)
+        self._rho = np.zeros(10)
         self.stance = None  # which leg's ground contact fired last (0 left, 1 right)
-        self.previous_contact = np.zeros(2)
+        self.previous_contact = (0.0, 0.0)
+
+    def _set_hip_extensor(self, alpha_hip: float, theta_hip_max: float) -> None:
+        """The learnt parameters: slope and threshold of the hip extensor sensor; AS fires before it."""
+        self.alpha_hip, self.theta_hip_max = alpha_hip, theta_hip_max
+        self._alpha[0:2] = alpha_hip
+        self._theta[0:2] = theta_hip_max
+        self._theta[4:6] = theta_hip_max - math.radians(self.params.as_lead_deg)
 
     def step(self, sensors: np.ndarray) -> np.ndarray:
         p = self.params
-        hip = sensors[0:2]
-        knee = sensors[2:4]
-        ground = sensors[4:6]
         if self.table is not None:
             k = int(np.argmin(np.abs(self.table[0] - math.degrees(sensors[6]))))
-            self.alpha_hip = float(self.table[1][k])
-            self.theta_hip_max = math.radians(float(self.table[2][k]))
+            if k != self._entry:
+                self._entry = k
+                self._set_hip_extensor(float(self.table[1][k]), math.radians(float(self.table[2][k])))
         # ground contact neurons fire on touch-down and hold until the other foot touches down:
         # G_i is 1 for the stance leg, 0 for the swing leg (no ambiguity in double support)
-        touchdown = (ground > 0.5) & (self.previous_contact < 0.5)
-        if touchdown.any():
-            self.stance = int(np.flatnonzero(touchdown)[-1]) if touchdown.sum() == 1 else int(np.argmax(hip))
-        elif self.stance is None and ground.any():
-            self.stance = int(np.argmax(ground))
-        self.previous_contact = ground.copy()
-        g_own = np.zeros(2)
-        if self.stance is not None:
-            g_own[self.stance] = 1.0
-        g_other = g_own[::-1]
+        hip_l, hip_r, _, _, ground_l, ground_r = sensors[:6].tolist()
+        was_l, was_r = self.previous_contact
+        down_l, down_r = ground_l > 0.5 and was_l < 0.5, ground_r > 0.5 and was_r < 0.5
+        if down_l or down_r:
+            self.stance = (0 if down_l else 1) if down_l != down_r else int(hip_r > hip_l)
+        elif self.stance is None and (ground_l or ground_r):
+            self.stance = int(ground_r > ground_l)
+        self.previous_contact = (ground_l, ground_r)
         # sensor neurons (3.4)
-        hip_e = sensor_neuron(self.alpha_hip, self.theta_hip_max, hip)
-        hip_f = sensor_neuron(p.alpha_hip_flexor, -math.radians(p.theta_hip_min_deg), -hip)
-        stretch = sensor_neuron(p.alpha_as, self.theta_hip_max - math.radians(p.as_lead_deg), hip)
-        knee_e = sensor_neuron(p.alpha_knee, math.radians(p.theta_knee_extended_deg), knee)
-        knee_f = sensor_neuron(p.alpha_knee, -math.radians(p.theta_knee_flexed_deg), -knee)
-        we, wi = p.w_excite, p.w_inhibit
-        drive = np.array(
-            [
-                we * g_other + wi * hip_e,  # hip EM: (b), (c)
-                we * g_own + wi * hip_f,  # hip FM: (a), (c)
-                we * g_own + we * stretch + wi * knee_e,  # knee EM: (a), (d), (c)
-                we * g_other + wi * stretch + wi * knee_f,  # knee FM: (b), (d), (c)
-            ]
-        )
-        self._sensor_neurons = (hip_e, hip_f, stretch, knee_e, knee_f, g_own)
-        self.y += self.decay * (drive - self.y)  # (3.5)
-        u = 1.0 / (1.0 + np.exp(p.alpha_motor * (p.theta_motor - self.y)))
-        self.activity = u
-        v_hip = p.m_hip * (u[0] - u[1])  # (3.6), G_E = 1, G_F = -1
-        v_knee = p.m_knee * (u[2] - u[3])
-        return np.array([v_hip[0], v_hip[1], v_knee[0], v_knee[1]])
+        rho = self._rho = sensor_neuron(self._alpha, self._theta, sensors[_PHI] * _SIGN)
+        # motor neurons (3.5): Fig. 3.7's synapses (a)-(d), then exact integration over the tick
+        drive = (self._t1[0 if self.stance is None else self.stance + 1] + self._w2 * rho[_T2]) + self._w3 * rho[_T3]
+        self.y += self.decay * (drive - self.y)
+        u = self.activity = 1.0 / (1.0 + np.exp(p.alpha_motor * (p.theta_motor - self.y)))
+        return self._m * (u[_EM] - u[_FM])  # (3.6), G_E = 1, G_F = -1: [hip l, hip r, knee l, knee r]
 
     def neurons(self) -> np.ndarray:
-        hip_e, hip_f, stretch, knee_e, knee_f, g_own = self._sensor_neurons
-        return np.concatenate([hip_e, hip_f, stretch, knee_e, knee_f, self.activity.ravel(), g_own])
+        stance = 0 if self.stance is None else self.stance + 1
+        return np.concatenate([self._rho, self.activity, self._g_own[stance]])
