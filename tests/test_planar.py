@@ -46,6 +46,71 @@ def test_sensor_neuron_3_4():
     assert sensor_neuron(10.0, 1.0, 2.0) > 0.99 and sensor_neuron(10.0, 1.0, 0.0) < 0.01
 
 
+class NeuronByNeuron:
+    """Fig. 3.7 written out one synapse at a time, the reference for the vectorised controller."""
+
+    def __init__(self, p, alpha_hip, theta_hip_max_deg):
+        self.p, self.alpha, self.theta = p, alpha_hip, np.radians(theta_hip_max_deg)
+        self.y = {(k, s): 0.0 for k in ("hip_EM", "hip_FM", "knee_EM", "knee_FM") for s in (0, 1)}
+        self.stance, self.previous = None, (0.0, 0.0)
+
+    def step(self, s):
+        p, rad = self.p, np.radians
+        hip, knee, ground = s[0:2], s[2:4], s[4:6]
+        down = [ground[i] > 0.5 and self.previous[i] < 0.5 for i in (0, 1)]
+        if any(down):
+            self.stance = down.index(True) if sum(down) == 1 else int(hip[1] > hip[0])
+        elif self.stance is None and any(ground):
+            self.stance = int(ground[1] > ground[0])
+        self.previous = tuple(ground)
+        volts = {}
+        for i in (0, 1):
+            own = 1.0 if self.stance == i else 0.0
+            other = 1.0 if self.stance == 1 - i else 0.0
+            hip_e = sensor_neuron(self.alpha, self.theta, hip[i])  # (3.4)
+            hip_f = sensor_neuron(p.alpha_hip_flexor, -rad(p.theta_hip_min_deg), -hip[i])
+            stretch = sensor_neuron(p.alpha_as, self.theta - rad(p.as_lead_deg), hip[i])
+            knee_e = sensor_neuron(p.alpha_knee, rad(p.theta_knee_extended_deg), knee[i])
+            knee_f = sensor_neuron(p.alpha_knee, -rad(p.theta_knee_flexed_deg), -knee[i])
+            we, wi = p.w_excite, p.w_inhibit
+            drive = {
+                "hip_EM": we * other + wi * hip_e,  # (b) swing, (c) articular reflex
+                "hip_FM": we * own + wi * hip_f,  # (a) stance, (c)
+                "knee_EM": we * own + we * stretch + wi * knee_e,  # (a), (d) extension reflex, (c)
+                "knee_FM": we * other + wi * stretch + wi * knee_f,  # (b), (d), (c)
+            }
+            u = {}
+            for k, d in drive.items():  # (3.5), integrated exactly over one tick
+                self.y[k, i] += (1 - np.exp(-p.control_dt / p.tau)) * (d - self.y[k, i])
+                u[k] = 1 / (1 + np.exp(p.alpha_motor * (p.theta_motor - self.y[k, i])))
+            volts["hip", i] = p.m_hip * (u["hip_EM"] - u["hip_FM"])  # (3.6)
+            volts["knee", i] = p.m_knee * (u["knee_EM"] - u["knee_FM"])
+        return np.array([volts["hip", 0], volts["hip", 1], volts["knee", 0], volts["knee", 1]])
+
+
+def test_vectorised_controller_matches_the_network_neuron_by_neuron():
+    from sfl_brain.messages import ControllerReset, SensorFrame
+
+    rng = np.random.default_rng(3)
+    sensors = ["hip_l", "hip_r", "knee_l", "knee_r", "contact_l", "contact_r", "slope", "pitch"]
+    for alpha, theta in ((10.0, 110.0), (3.0, 140.0), (18.0, 95.0)):
+        fast = ReflexController()
+        fast.handle(
+            ControllerReset(
+                trial_id=0,
+                seed=0,
+                params={"alpha_hip": alpha, "theta_hip_max_deg": theta},
+                sensors=sensors,
+                commands=list(fast.COMMANDS),
+            )
+        )
+        reference = NeuronByNeuron(fast.params, alpha, theta)
+        for tick in range(400):
+            s = np.concatenate([rng.uniform(0.8, 2.4, 2), rng.uniform(-1.2, 0, 2), rng.random(2) < 0.5, [0, 0]])
+            got = fast.handle(SensorFrame(trial_id=0, tick=tick, values=s.astype(float))).values
+            np.testing.assert_allclose(got, reference.step(s), rtol=0, atol=1e-12)
+
+
 def test_a_good_gait_walks_and_is_deterministic():
     _, first = trial(10, 110)
     _, second = trial(10, 110)
