@@ -1,6 +1,6 @@
 """Lockstep round trip per control tick: raw Zenoh vs the framework's body<->controller link vs one process.
 
-    python benchmarks/bus.py [--ticks 5000]
+    python benchmarks/bus.py [--ticks 10000] [--blocks 20]
 
 (raw) a bare Zenoh pub/sub ping-pong between two processes (100-byte payload), both sides
     blocking in a ring channel's recv() (the fastest bare pattern on this machine): the
@@ -172,7 +172,8 @@ def startup(repeats=3):
 
 def main() -> None:
     parser = argparse.ArgumentParser()
-    parser.add_argument("--ticks", type=int, default=5000)
+    parser.add_argument("--ticks", type=int, default=10000)
+    parser.add_argument("--blocks", type=int, default=20)
     args = parser.parse_args()
     endpoint = bus.free_endpoint()
     session = bus.open_session([endpoint], [])
@@ -181,12 +182,14 @@ def main() -> None:
         raw, example = Raw(session, endpoint), Raw(session, endpoint, example=True)
         framework = Framework(session, endpoint)
         raw.block(300), example.block(300), framework.block(300)  # warm up all three
-        raw_t, example_t, framework_t = [], [], []
-        block = max(args.ticks // 10, 1)
-        for _ in range(10):  # interleaved blocks, so that all see the same machine load
-            raw_t += raw.block(block)
-            example_t += example.block(block)
-            framework_t += framework.block(block)
+        raw_t, example_t, framework_t, paired = [], [], [], []
+        block = max(args.ticks // args.blocks, 1)
+        for _ in range(args.blocks):  # interleaved blocks, so that all see the same machine load
+            r, e, f = raw.block(block), example.block(block), framework.block(block)
+            raw_t += r
+            example_t += e
+            framework_t += f
+            paired.append(np.median(f) / np.median(r))
     finally:
         for side in (raw, example, framework):
             if side is not None:
@@ -201,6 +204,11 @@ def main() -> None:
     ratio = np.median(framework_t) / np.median(raw_t)
     added = (np.median(framework_t) - np.median(raw_t)) * 1e6
     print(f"  framework / raw (medians): {ratio:.2f}  (goal <= 1.20); the framework adds {added:.1f} us per tick")
+    q1, q2, q3 = np.percentile(paired, [25, 50, 75])
+    print(
+        f"  framework / raw, block by block ({len(paired)} pairs of adjacent blocks): "
+        f"median {q2:.2f}, IQR {q1:.2f}-{q3:.2f}"
+    )
     print(f"  framework / z_ping-z_pong (medians): {np.median(framework_t) / np.median(example_t):.2f}")
     s = startup()
     print(
