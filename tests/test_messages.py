@@ -1,3 +1,5 @@
+import dataclasses
+
 import msgpack
 import numpy as np
 import pytest
@@ -47,7 +49,9 @@ def test_packed_stream_messages_roundtrip_and_fall_back_for_other_arrays():
     data = m.encode(frame)
     assert data[0] == 0xC1 and len(data) == 3 + len("controller.sensors") + 16 + 24
     back = m.decode(data)
-    assert (back.trial_id, back.tick) == (3, -7) and back.values.dtype == np.float64
+    assert type(back) is m.SensorFrame and (back.trial_id, back.tick) == (3, -7) and back.values.dtype == np.float64
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        back.tick = 0  # built without __init__, still frozen
     np.testing.assert_array_equal(back.values, frame.values)
     # not a float64 vector: the general layout carries it unchanged
     for values in (np.arange(4, dtype=np.int32), np.zeros((2, 2))):
