@@ -47,8 +47,8 @@ class Message:
     STREAM: ClassVar[bool] = False
     _FIELDS: ClassVar[tuple[str, ...]] = ()
     _CHECKS: ClassVar[tuple[tuple[int, str, tuple[type, ...]], ...]] = ()
-    #: packed layout: (prefix bytes, struct of the scalars, scalars getter, vector name, maker), or None
-    _PACKED: ClassVar[tuple | None] = None
+    #: the hot-path layout of a ``packed=True`` message, or None
+    _PACKED: ClassVar[Packed | None] = None
 
 
 def _checker(annotation: Any):
@@ -85,7 +85,17 @@ _PACKED_MARK = 0xC1
 _PACKED_REGISTRY: dict[bytes, type[Message]] = {}
 
 
-def _packed_layout(cls, names: tuple[str, ...], hints: dict) -> tuple:
+class Packed(typing.NamedTuple):
+    """How a ``packed=True`` message is laid out: ``prefix | scalars | vector``."""
+
+    prefix: bytes  # 0xC1, schema version, tag length, tag
+    scalars: struct.Struct  # the int/float fields, little-endian int64/float64
+    get_scalars: Any  # message -> tuple of its scalar fields
+    vector: str  # the name of the float64 vector field
+    make: Any  # (scalars, vector) -> message
+
+
+def _packed_layout(cls, names: tuple[str, ...], hints: dict) -> Packed:
     *scalars, vector = names
     codes = {int: "q", float: "d"}
     if hints[vector] is not np.ndarray or any(hints[n] not in codes for n in scalars):
@@ -103,7 +113,7 @@ def _packed_layout(cls, names: tuple[str, ...], hints: dict) -> tuple:
         lines.append(f"    set_{n}(m, {'v' if n == vector else f's[{i}]'})")
     exec("\n".join([*lines, "    return m"]), namespace)
     layout = struct.Struct("<" + "".join(codes[hints[n]] for n in scalars))
-    return prefix, layout, operator.attrgetter(*scalars), vector, namespace["make"]
+    return Packed(prefix, layout, operator.attrgetter(*scalars), vector, namespace["make"])
 
 
 def message(tag: str, *, stream: bool = False, packed: bool = False):
@@ -129,7 +139,7 @@ def message(tag: str, *, stream: bool = False, packed: bool = False):
         _REGISTRY[tag] = cls
         if packed:
             cls._PACKED = _packed_layout(cls, names, hints)
-            _PACKED_REGISTRY[cls._PACKED[0][3:]] = cls
+            _PACKED_REGISTRY[tag.encode()] = cls
         return cls
 
     return wrap
@@ -193,28 +203,29 @@ def encode(msg: Message) -> bytes:
     """Serialise a registered message to bytes."""
     packed = msg._PACKED
     if packed is not None:
-        prefix, layout, scalars, vector, _ = packed
-        vector = getattr(msg, vector)
+        vector = getattr(msg, packed.vector)
         if type(vector) is np.ndarray and vector.dtype == _F8 and vector.ndim == 1:
             try:
-                return prefix + layout.pack(*scalars(msg)) + vector.tobytes()
+                return packed.prefix + packed.scalars.pack(*packed.get_scalars(msg)) + vector.tobytes()
             except struct.error:
                 pass  # a scalar of another type: the general layout reports it
     return msgpack.packb([SCHEMA_VERSION, msg.TAG, [getattr(msg, name) for name in msg._FIELDS]], default=_default)
 
 
 def _decode_packed(data: bytes) -> Message:
-    if len(data) < 3 or data[1] != SCHEMA_VERSION:
-        raise MessageError(f"schema version {data[1] if len(data) > 1 else None!r}, this side speaks {SCHEMA_VERSION}")
+    if len(data) < 3:
+        raise MessageError(f"packed payload of {len(data)} bytes is too short")
+    if data[1] != SCHEMA_VERSION:
+        raise MessageError(f"schema version {data[1]}, this side speaks {SCHEMA_VERSION}")
     end = 3 + data[2]
     cls = _PACKED_REGISTRY.get(data[3:end])
     if cls is None:
         raise MessageError(f"unknown packed message tag {data[3:end]!r}")
-    _, scalars, _, _, make = cls._PACKED
-    start = end + scalars.size
+    packed = cls._PACKED
+    start = end + packed.scalars.size
     if len(data) < start or (len(data) - start) % 8:
         raise MessageError(f"{cls.TAG}: packed payload of {len(data)} bytes does not fit its layout")
-    return make(scalars.unpack_from(data, end), np.frombuffer(data, _F8, offset=start))
+    return packed.make(packed.scalars.unpack_from(data, end), np.frombuffer(data, _F8, offset=start))
 
 
 def decode(data: bytes) -> Message:
