@@ -8,6 +8,10 @@
 (example) the same ping-pong as zenoh-python's own z_ping.py / z_pong.py examples (the pong
     answers in a subscriber callback, the ping waits on the default FIFO channel), the usual
     pattern of a "raw Zenoh Python round trip", shown for reference;
+(typed) the raw pattern carrying the framework's typed messages, written by hand: the pong
+    decodes the SensorFrame, calls the open-loop controller's handler and encodes its
+    MotorCommand; the ping encodes and decodes. No host, no BusLink: this splits the framework's
+    cost into the typed codec and dispatch, and the runtime around them;
 (framework) the body's BusLink to a controller hosted by ``sfl_brain.host`` in another process:
     a SensorFrame out, a MotorCommand back, typed, encoded, dispatched (the open-loop controller);
     raw and framework run in interleaved blocks so that both see the same machine load;
@@ -34,7 +38,7 @@ from modules.controllers.open_loop import OpenLoopController  # noqa: E402
 from sfl_brain import bus  # noqa: E402
 from sfl_brain.body import InProcessLink  # noqa: E402
 from sfl_brain.host import BusLink  # noqa: E402
-from sfl_brain.messages import ControllerReset, SensorFrame  # noqa: E402
+from sfl_brain.messages import ControllerReset, SensorFrame, decode, encode  # noqa: E402
 
 PONG = textwrap.dedent("""
     import sys, zenoh
@@ -66,35 +70,69 @@ PONG_EXAMPLE = textwrap.dedent("""
     done.wait()
     s.close()
 """)
+# (typed): the raw pong with the framework's codec and the open-loop controller, by hand
+PONG_TYPED = textwrap.dedent("""
+    import sys, zenoh
+    sys.path.insert(0, {root!r})
+    from sfl_brain import bus
+    from sfl_brain.messages import ControllerReset, decode, encode
+    from modules.controllers.open_loop import OpenLoopController
+    controller = OpenLoopController()
+    controller.handle(ControllerReset(trial_id=0, seed=0, params={{}}, sensors=["s"] * 8,
+                                      commands=list(controller.COMMANDS)))
+    s = bus.open_session(["tcp/127.0.0.1:0"], [sys.argv[1]])
+    sub = s.declare_subscriber("bench/typed/ping", zenoh.handlers.RingChannel(64))
+    pub = s.declare_publisher("bench/typed/pong")
+    tok = s.liveliness().declare_token("bench/typed/pong")
+    while True:
+        data = sub.recv().payload.to_bytes()
+        if data == b"stop": break
+        pub.put(encode(controller.handle(decode(data))))
+    s.close()
+""")
 SENSORS = ["hip_l", "hip_r", "knee_l", "knee_r", "contact_l", "contact_r", "slope", "pitch"]
 COMMANDS = ["v_hip_l", "v_hip_r", "v_knee_l", "v_knee_r"]
 
 
 class Raw:
-    """A bare ping-pong. Default: the fastest pattern found on this machine, both sides blocking in
-    a ring channel's recv(). ``example``: zenoh-python's z_ping/z_pong (callback pong, FIFO ping)."""
+    """A bare ping-pong. ``raw``: the fastest pattern found on this machine, both sides blocking in
+    a ring channel's recv(). ``example``: zenoh-python's z_ping/z_pong (callback pong, FIFO ping).
+    ``typed``: the raw pattern with the framework's messages, codec and controller, by hand."""
 
-    def __init__(self, session, endpoint, example=False):
+    def __init__(self, session, endpoint, kind="raw"):
         root = str(Path(__file__).resolve().parents[1])
-        prefix = "bench/ex" if example else "bench"
-        script = (PONG_EXAMPLE if example else PONG).format(root=root)
-        self.proc = subprocess.Popen([sys.executable, "-c", script, endpoint])
+        prefix, script = {
+            "raw": ("bench", PONG),
+            "example": ("bench/ex", PONG_EXAMPLE),
+            "typed": ("bench/typed", PONG_TYPED),
+        }[kind]
+        self.proc = subprocess.Popen([sys.executable, "-c", script.format(root=root), endpoint])
         wait_alive(session, f"{prefix}/pong")
-        if example:
+        if kind == "example":
             self.pub = session.declare_publisher(f"{prefix}/ping", congestion_control=zenoh.CongestionControl.BLOCK)
             self.sub = session.declare_subscriber(f"{prefix}/pong")
         else:
             self.pub = session.declare_publisher(f"{prefix}/ping")
             self.sub = session.declare_subscriber(f"{prefix}/pong", zenoh.handlers.RingChannel(64))
+        self.typed = kind == "typed"
         self.payload = b"x" * 100
+        self.values = np.zeros(len(SENSORS))
+        self.tick = 0
 
     def block(self, ticks):
         times = []
         pub, recv, payload = self.pub, self.sub.recv, self.payload
         for _ in range(ticks):
-            t = time.perf_counter()
-            pub.put(payload)
-            recv()
+            if self.typed:
+                frame = SensorFrame(trial_id=0, tick=self.tick, values=self.values)
+                self.tick += 1
+                t = time.perf_counter()
+                pub.put(encode(frame))
+                decode(recv().payload.to_bytes())
+            else:
+                t = time.perf_counter()
+                pub.put(payload)
+                recv()
             times.append(time.perf_counter() - t)
         return times
 
@@ -177,30 +215,35 @@ def main() -> None:
     args = parser.parse_args()
     endpoint = bus.free_endpoint()
     session = bus.open_session([endpoint], [])
-    raw = example = framework = None
+    sides = {}
     try:
-        raw, example = Raw(session, endpoint), Raw(session, endpoint, example=True)
-        framework = Framework(session, endpoint)
-        raw.block(300), example.block(300), framework.block(300)  # warm up all three
-        raw_t, example_t, framework_t, paired = [], [], [], []
+        for kind in ("raw", "example", "typed"):
+            sides[kind] = Raw(session, endpoint, kind)
+        sides["framework"] = Framework(session, endpoint)
+        times = {kind: [] for kind in sides}
+        blocks = {kind: [] for kind in sides}  # the median of each block
+        for side in sides.values():
+            side.block(300)  # warm up
         block = max(args.ticks // args.blocks, 1)
         for _ in range(args.blocks):  # interleaved blocks, so that all see the same machine load
-            r, e, f = raw.block(block), example.block(block), framework.block(block)
-            raw_t += r
-            example_t += e
-            framework_t += f
-            paired.append(np.median(f) / np.median(r))
+            for kind, side in sides.items():
+                t = side.block(block)
+                times[kind] += t
+                blocks[kind].append(np.median(t))
     finally:
-        for side in (raw, example, framework):
-            if side is not None:
-                side.close()
+        for side in sides.values():
+            side.close()
         session.close()
+    raw_t, example_t, typed_t, framework_t = times["raw"], times["example"], times["typed"], times["framework"]
+    paired = np.array(blocks["framework"]) / np.array(blocks["raw"])
+    over_typed = np.array(blocks["framework"]) / np.array(blocks["typed"])
     local = in_process_round_trips(args.ticks)
     print(f"lockstep round trip per tick, {args.ticks} ticks")
-    print(f"  raw zenoh pub/sub (2 processes)     {stats(raw_t)}")
-    print(f"  zenoh's z_ping/z_pong (2 processes) {stats(example_t)}")
-    print(f"  sfl BusLink <-> host (2 processes)  {stats(framework_t)}")
-    print(f"  sfl InProcessLink (1 process)       {stats(local)}")
+    print(f"  raw zenoh pub/sub (2 processes)      {stats(raw_t)}")
+    print(f"  zenoh's z_ping/z_pong (2 processes)  {stats(example_t)}")
+    print(f"  typed messages by hand (2 processes) {stats(typed_t)}")
+    print(f"  sfl BusLink <-> host (2 processes)   {stats(framework_t)}")
+    print(f"  sfl InProcessLink (1 process)        {stats(local)}")
     ratio = np.median(framework_t) / np.median(raw_t)
     added = (np.median(framework_t) - np.median(raw_t)) * 1e6
     print(f"  framework / raw (medians): {ratio:.2f}  (goal <= 1.20); the framework adds {added:.1f} us per tick")
@@ -210,6 +253,11 @@ def main() -> None:
         f"median {q2:.2f}, IQR {q1:.2f}-{q3:.2f}"
     )
     print(f"  framework / z_ping-z_pong (medians): {np.median(framework_t) / np.median(example_t):.2f}")
+    q1, q2, q3 = np.percentile(over_typed, [25, 50, 75])
+    print(
+        f"  framework / typed messages by hand, block by block: median {q2:.2f}, IQR {q1:.2f}-{q3:.2f}; "
+        f"by hand, the typed messages add {(np.median(typed_t) - np.median(raw_t)) * 1e6:.1f} us per tick to raw"
+    )
     s = startup()
     print(
         f"sfl run start-up, 5 module processes: ready {np.median(s[:, 0]):.2f} s, first trial done "

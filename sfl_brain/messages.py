@@ -116,6 +116,30 @@ def _packed_layout(cls, names: tuple[str, ...], hints: dict) -> Packed:
     return Packed(prefix, layout, operator.attrgetter(*scalars), vector, namespace["make"])
 
 
+def _slot_init(cls) -> None:
+    """Give a frozen slotted dataclass an ``__init__`` with the same signature that fills the slots
+    through their descriptors: the dataclass's own goes through ``object.__setattr__`` per field
+    and costs twice as much, on every message the runtime builds (two per control tick)."""
+    fields = dataclasses.fields(cls)
+    if hasattr(cls, "__post_init__") or any(f.default_factory is not dataclasses.MISSING for f in fields):
+        return
+    namespace: dict[str, Any] = {}
+    params, lines = [], []
+    for f in fields:
+        namespace[f"set_{f.name}"] = cls.__dict__[f.name].__set__
+        if f.default is dataclasses.MISSING:
+            params.append(f.name)
+        else:
+            namespace[f"default_{f.name}"] = f.default
+            params.append(f"{f.name}=default_{f.name}")
+        lines.append(f"    set_{f.name}(self, {f.name})")
+    signature = f"self, *, {', '.join(params)}" if params else "self"
+    exec(f"def __init__({signature}):\n" + "\n".join(lines or ["    pass"]), namespace)
+    init = namespace["__init__"]
+    init.__qualname__ = f"{cls.__qualname__}.__init__"
+    cls.__init__ = init
+
+
 def message(tag: str, *, stream: bool = False, packed: bool = False):
     """Class decorator: make a frozen keyword-only dataclass and register it under ``tag``.
 
@@ -126,6 +150,7 @@ def message(tag: str, *, stream: bool = False, packed: bool = False):
         if tag in _REGISTRY:
             raise ValueError(f"message tag {tag!r} registered twice")
         cls = dataclasses.dataclass(frozen=True, kw_only=True, slots=True)(cls)
+        _slot_init(cls)
         hints = typing.get_type_hints(cls)
         names = tuple(f.name for f in dataclasses.fields(cls))
         cls.TAG = tag
