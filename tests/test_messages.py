@@ -65,3 +65,18 @@ def test_wrong_field_type_is_rejected():
     bad = msgpack.packb([m.SCHEMA_VERSION, "ofc.grade", ["high"]])
     with pytest.raises(m.MessageError, match="ofc.grade.eta"):
         m.decode(bad)
+
+
+def test_messages_keep_the_dataclass_constructor_contract():
+    assert m.Ack() == m.Ack(detail="") and m.Ack(detail="x").detail == "x"  # defaults
+    reset = m.ControllerReset(trial_id=1, seed=2, params={}, sensors=[], commands=[])
+    assert (reset.log, reset.dt) == (False, 0.01)
+    with pytest.raises(TypeError, match="missing 1 required keyword-only argument: 'values'"):
+        m.SensorFrame(trial_id=0, tick=1)
+    with pytest.raises(TypeError, match="positional"):
+        m.SensorFrame(0, 1, np.zeros(2))
+    with pytest.raises(TypeError, match="unexpected keyword argument 'bogus'"):
+        m.Ack(bogus=1)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        reset.seed = 3
+    assert dataclasses.replace(reset, seed=5).seed == 5
