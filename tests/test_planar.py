@@ -178,3 +178,64 @@ def test_exploit_walks_with_the_parameters_of_the_given_maps(tmp_path):
     stalled = run_local(load(SCENARIOS / "e3_5_terrain.yaml", [*overrides, f"protocol.maps={stalling}"]))[-1]
     assert walked["success"] and walked["m_distance"] > 2.0
     assert not stalled["success"] and stalled["m_distance"] < 1.0
+
+
+def test_garbage_on_the_tick_keys_is_dropped_and_changes_nothing(tmp_path):
+    """Malformed payloads published onto a running run's lockstep keys (both layouts) are logged and
+    dropped by the controller's host and by the body's link; the trials come out as without them."""
+    import subprocess
+    import sys
+    import threading
+
+    import msgpack
+    import zenoh
+
+    from sfl_brain import bus
+    from sfl_brain.messages import SCHEMA_VERSION, SensorFrame, encode
+
+    from .conftest import ROOT
+    from .test_e2e import _wait_for
+
+    endpoint, out = bus.free_endpoint(), tmp_path / "run"
+    sets = ["protocol.trials=10", "record.body_every=0"]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sfl_brain.cli", "run", str(SCENARIOS / "quickstart.yaml")]
+        + [arg for s in sets for arg in ("--set", s)]
+        + ["--listen", endpoint, "--out", str(out), "--quiet"],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    line = proc.stdout.readline()
+    run_id = line.split("run id ")[1].split(";")[0]
+    garbage = [
+        b"\x00garbage\xff",  # not msgpack
+        msgpack.packb([SCHEMA_VERSION, "no.such.tag", []]),
+        b"\xc1",  # packed, too short
+        b"\xc1\x09\x12controller.sensors" + bytes(24),  # packed, another schema version
+        b"\xc1\x02\x05bogus" + bytes(24),  # packed, unknown tag
+        encode(SensorFrame(trial_id=0, tick=0, values=np.zeros(3)))[:-3],  # packed, cut short
+    ]
+    keys = [bus.key(run_id, "controller", "controller.sensors"), bus.key(run_id, "body", "body.command")]
+    stop = threading.Event()
+    with zenoh.open(bus.config(["tcp/127.0.0.1:0"], [endpoint])) as session:
+        assert _wait_for(lambda: len(list(session.liveliness().get(bus.alive_key(run_id, "*"), timeout=1.0))) == 5)
+
+        def spray():
+            while not stop.wait(0.02):  # slow enough never to fill a 64-deep ring between two reads
+                for key in keys:
+                    for payload in garbage:
+                        session.put(key, payload)
+
+        sprayer = threading.Thread(target=spray)
+        sprayer.start()
+        try:
+            assert proc.wait(timeout=240) == 0, proc.stderr.read()
+        finally:
+            stop.set()
+            sprayer.join()
+    assert "dropped malformed stream message" in (out / "logs" / "controller.log").read_text()
+    assert "dropped malformed command" in (out / "logs" / "body.log").read_text()
+    local = run_local(load(SCENARIOS / "quickstart.yaml", sets))
+    assert stable(local) == stable(read_records(out))
