@@ -185,7 +185,8 @@ class Controller(Module):
         values = self.step(frame.values[self._sensor_index])
         if self._neuron_log is not None:
             self._neuron_log[0].append(self.neurons())
-        return MotorCommand(trial_id=frame.trial_id, tick=frame.tick, values=values)
+        # a step that returns a list or float32 still sends a float64 vector (the packed layout)
+        return MotorCommand(trial_id=frame.trial_id, tick=frame.tick, values=np.asarray(values, dtype=np.float64))
 
     def flush_neurons(self) -> None:
         """Send a logged trial's neuron activities as scalar columns on ``sim_time`` and ``trial``."""

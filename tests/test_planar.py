@@ -239,3 +239,23 @@ def test_garbage_on_the_tick_keys_is_dropped_and_changes_nothing(tmp_path):
     assert "dropped malformed command" in (out / "logs" / "body.log").read_text()
     local = run_local(load(SCENARIOS / "quickstart.yaml", sets))
     assert stable(local) == stable(read_records(out))
+
+
+def test_a_controller_step_may_return_a_list_and_still_sends_a_float64_vector():
+    from sfl_brain.body import Controller
+    from sfl_brain.messages import ControllerReset, SensorFrame, decode, encode
+
+    class Listing(Controller):
+        COMMANDS = ("v_hip_l", "v_hip_r")
+
+        def configure(self, params, seed):
+            pass
+
+        def step(self, sensors):
+            return [1, 2.5]
+
+    controller = Listing()
+    controller.handle(ControllerReset(trial_id=0, seed=0, params={}, sensors=["x"], commands=list(Listing.COMMANDS)))
+    command = decode(encode(controller.handle(SensorFrame(trial_id=0, tick=3, values=np.zeros(1)))))
+    assert command.tick == 3 and command.values.dtype == np.float64
+    np.testing.assert_array_equal(command.values, [1.0, 2.5])
