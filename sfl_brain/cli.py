@@ -207,7 +207,7 @@ def worker(scenario, connect, run_id, name, overrides) -> None:
         "connect": list(connect),
         "rrd": None,
         "viewer": None,
-        "tick_timeout": plan.scenario.timeouts.trial,
+        "tick_timeout": plan.scenario.timeouts.tick,
         "watch_stdin": False,
         "colocated": hosted_spec(ctrl),
     }

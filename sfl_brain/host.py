@@ -90,7 +90,10 @@ class BusLink:
             raise LinkError("interrupted: the body worker is stopping")
         while self.subscriber.try_recv() is not None:  # drop stale commands and wake-ups
             pass
-        request(self.session, self.reset_key, msg, self.timeout)
+        try:
+            request(self.session, self.reset_key, msg, self.timeout)
+        except NoReply as exc:  # a late controller interrupts the trial (it is retried); its errors do not
+            raise LinkError(f"controller reset for trial {msg.trial_id}: {exc}") from None
 
     def step(self, frame: SensorFrame) -> MotorCommand:
         if not self._stopping:
@@ -130,14 +133,21 @@ class RemoteError(RuntimeError):
     """A module answered a request with an error, or nobody answered."""
 
 
+class NoReply(RemoteError):
+    """Nobody answered a request within its timeout."""
+
+
 def request(session: zenoh.Session, key_expr: str, msg: Message, timeout: float) -> Message:
     """Send ``msg`` to the queryable at ``key_expr`` and return its decoded reply."""
     replies = session.get(key_expr, payload=encode(msg), timeout=timeout)
     for reply in replies:
         if reply.ok is not None:
             return decode(reply.ok.payload.to_bytes())
-        raise RemoteError(reply.err.payload.to_string())
-    raise RemoteError(f"no reply from {key_expr} within {timeout:g} s")
+        text = reply.err.payload.to_string()
+        if text == "Timeout":  # what Zenoh answers when the queryable is there but late
+            break
+        raise RemoteError(text)
+    raise NoReply(f"no reply from {key_expr} within {timeout:g} s")
 
 
 def make_module(reference: str, params: dict, seed: int, entity: str) -> Module:

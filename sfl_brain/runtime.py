@@ -155,7 +155,7 @@ class Supervisor:
             "rrd": str(self.run_dir / "rerun" / f"{inst.name}.rrd") if self.record else None,
             "viewer": self.viewer,
             "realtime": self.realtime,
-            "tick_timeout": self.plan.scenario.timeouts.trial,
+            "tick_timeout": self.plan.scenario.timeouts.tick,
             "colocated": hosted_spec(colocated),
         }
         return spec

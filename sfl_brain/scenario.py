@@ -93,6 +93,12 @@ class Timeouts(Strict):
     ready: float = Field(60.0, gt=0, description="s for every module to come alive")
     request: float = Field(30.0, gt=0, description="s for a brain module to answer")
     trial: float = Field(300.0, gt=0, description="s of wall time for one trial")
+    tick: float = Field(
+        10.0,
+        gt=0,
+        description="s of wall time for a controller to answer one tick (or a reset); "
+        "a trial whose controller is later than this is interrupted and retried",
+    )
 
 
 class ScenarioModel(Strict):

@@ -259,3 +259,39 @@ def test_a_controller_step_may_return_a_list_and_still_sends_a_float64_vector():
     command = decode(encode(controller.handle(SensorFrame(trial_id=0, tick=3, values=np.zeros(1)))))
     assert command.tick == 3 and command.values.dtype == np.float64
     np.testing.assert_array_equal(command.values, [1.0, 2.5])
+
+
+SLOW_ONCE = '''
+import time
+
+from modules.controllers.reflex import ReflexController
+
+
+class SlowOnce(ReflexController):
+    """The reflex controller, but it hangs for 2 s on one tick, once per process."""
+
+    hung = False
+
+    def step(self, sensors):
+        if not SlowOnce.hung and getattr(self, "_ticks", 0) == 50:
+            SlowOnce.hung = True
+            time.sleep(2.0)
+        self._ticks = getattr(self, "_ticks", 0) + 1
+        return super().step(sensors)
+
+    def configure(self, params, seed):
+        self._ticks = 0
+        super().configure(params, seed)
+'''
+
+
+def test_a_controller_that_hangs_past_the_tick_timeout_interrupts_the_trial_which_is_retried(tmp_path):
+    (tmp_path / "slow_once.py").write_text(SLOW_ONCE)
+    sets = ["protocol.trials=4", "record.body_every=0"]
+    slow = [*sets, f"modules.controller.impl={tmp_path / 'slow_once.py'}:SlowOnce", "timeouts.tick=1"]
+    out = tmp_path / "run"
+    done = sfl_run(SCENARIOS / "quickstart.yaml", out, *slow)
+    assert done.returncode == 0, done.stderr
+    assert "trial 0 interrupted" in done.stdout and "no command for tick 50 within 1 s" in done.stdout, done.stdout
+    # the retried trial is the trial a controller that never hangs gives
+    assert stable(run_local(load(SCENARIOS / "quickstart.yaml", sets))) == stable(read_records(out))
