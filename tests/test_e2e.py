@@ -10,7 +10,6 @@ import time
 import pandas as pd
 import psutil
 import pytest
-import zenoh
 from rerun.chunk import RrdReader
 
 from sfl_brain import bus
@@ -18,7 +17,7 @@ from sfl_brain.local import run_local
 from sfl_brain.records import read_records
 from sfl_brain.scenario import load
 
-from .conftest import ROOT, SCENARIOS, sfl, sfl_run
+from .conftest import ROOT, SCENARIOS, joined_run, sfl, sfl_run, wait_for
 
 VOLATILE = {"wall_ms", "worker"}
 
@@ -132,37 +131,13 @@ def _start(args, tmp_path):
     )
 
 
-def _wait_for(predicate, timeout=60.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.05)
-    return False
-
-
 def test_garbage_on_the_bus_is_logged_and_dropped(tmp_path):
-    endpoint = bus.free_endpoint()
     out = tmp_path / "run"
-    proc = _start(
-        [
-            SCENARIOS / "analytic_learn.yaml",
-            "--set",
-            "protocol.trials=3000",
-            "--listen",
-            endpoint,
-            "--out",
-            str(out),
-            "--quiet",
-        ],
-        tmp_path,
-    )
-    line = proc.stdout.readline()
-    assert "run id" in line, line
-    run_id = line.split("run id ")[1].split(";")[0]
-    with zenoh.open(bus.config(["tcp/127.0.0.1:0"], [endpoint])) as session:
-        # wait until this new peer sees every module of the run (gossip has reached it)
-        assert _wait_for(lambda: len(list(session.liveliness().get(bus.alive_key(run_id, "*"), timeout=1.0))) == 4)
+    with joined_run(SCENARIOS / "analytic_learn.yaml", out, "protocol.trials=3000", modules=4) as (
+        proc,
+        session,
+        run_id,
+    ):
         errors = []
         for target in (
             "acc/acc.evaluate",
@@ -187,7 +162,7 @@ def _long_walker_run(tmp_path, trials_seen):
         tmp_path,
     )
     records = out / "records.jsonl"
-    assert _wait_for(lambda: records.exists() and records.read_text().count('"kind":"trial"') >= trials_seen, 120)
+    assert wait_for(lambda: records.exists() and records.read_text().count('"kind":"trial"') >= trials_seen, 120)
     return proc, out, records, psutil.Process(proc.pid).children(recursive=True)
 
 
@@ -237,7 +212,7 @@ def test_viewer_url_streams_live_and_the_run_folder_keeps_the_recording(tmp_path
             with socket.socket() as s:
                 return s.connect_ex(("127.0.0.1", port)) == 0
 
-        assert _wait_for(listening, 30)
+        assert wait_for(listening, 30)
         out = tmp_path / "run"
         done = sfl_run(
             SCENARIOS / "analytic_learn.yaml",

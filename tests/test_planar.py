@@ -183,32 +183,17 @@ def test_exploit_walks_with_the_parameters_of_the_given_maps(tmp_path):
 def test_garbage_on_the_tick_keys_is_dropped_and_changes_nothing(tmp_path):
     """Malformed payloads published onto a running run's lockstep keys (both layouts) are logged and
     dropped by the controller's host and by the body's link; the trials come out as without them."""
-    import subprocess
-    import sys
     import threading
 
     import msgpack
-    import zenoh
 
     from sfl_brain import bus
     from sfl_brain.messages import SCHEMA_VERSION, SensorFrame, encode
 
-    from .conftest import ROOT
-    from .test_e2e import _wait_for
+    from .conftest import joined_run
 
-    endpoint, out = bus.free_endpoint(), tmp_path / "run"
+    out = tmp_path / "run"
     sets = ["protocol.trials=10", "record.body_every=0"]
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "sfl_brain.cli", "run", str(SCENARIOS / "quickstart.yaml")]
-        + [arg for s in sets for arg in ("--set", s)]
-        + ["--listen", endpoint, "--out", str(out), "--quiet"],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    line = proc.stdout.readline()
-    run_id = line.split("run id ")[1].split(";")[0]
     garbage = [
         b"\x00garbage\xff",  # not msgpack
         msgpack.packb([SCHEMA_VERSION, "no.such.tag", []]),
@@ -217,10 +202,9 @@ def test_garbage_on_the_tick_keys_is_dropped_and_changes_nothing(tmp_path):
         b"\xc1\x02\x05bogus" + bytes(24),  # packed, unknown tag
         encode(SensorFrame(trial_id=0, tick=0, values=np.zeros(3)))[:-3],  # packed, cut short
     ]
-    keys = [bus.key(run_id, "controller", "controller.sensors"), bus.key(run_id, "body", "body.command")]
     stop = threading.Event()
-    with zenoh.open(bus.config(["tcp/127.0.0.1:0"], [endpoint])) as session:
-        assert _wait_for(lambda: len(list(session.liveliness().get(bus.alive_key(run_id, "*"), timeout=1.0))) == 5)
+    with joined_run(SCENARIOS / "quickstart.yaml", out, *sets, modules=5) as (proc, session, run_id):
+        keys = [bus.key(run_id, "controller", "controller.sensors"), bus.key(run_id, "body", "body.command")]
 
         def spray():
             while not stop.wait(0.02):  # slow enough never to fill a 64-deep ring between two reads
