@@ -43,6 +43,10 @@ M_TRUNK, M_THIGH, M_SHANK = 0.45, 0.20, 0.08
 TRUNK_W, TRUNK_H, TRUNK_UP = 0.10, 0.06, 0.04
 HIP_LIMITS = (math.radians(-70), math.radians(70))
 KNEE_LIMITS = (math.radians(-110), 0.0)
+# the walker's picture: points [trunk, hip, left knee, left foot, right knee, right foot] as three strips
+_WALKER_STRIPS = ([0, 1], [1, 2, 3], [1, 4, 5])
+_WALKER_COLORS = np.array([(90, 90, 90), (40, 110, 220), (230, 140, 30)], dtype=np.uint8)
+
 SENSORS = ("hip_l", "hip_r", "knee_l", "knee_r", "contact_l", "contact_r", "slope", "pitch")
 COMMANDS = ("v_hip_l", "v_hip_r", "v_knee_l", "v_knee_r")
 
@@ -310,18 +314,17 @@ class PlanarBiped(Body):
         rec.send_columns(f"{self.entity}/contacts/left", idx, rr.Scalars.columns(scalars=trace[:, 4]))
         rec.send_columns(f"{self.entity}/contacts/right", idx, rr.Scalars.columns(scalars=trace[:, 5]))
         every = max(1, int(round(0.04 / self.params.control_dt)))  # 25 pictures per simulated second
-        for k in range(0, n, every):
-            f = frames[k]
-            rec.set_time("sim_time", duration=float(times[k]))
-            rec.set_time("trial", sequence=trial_id)
-            rec.log(
-                f"{self.entity}/walker",
-                rr.LineStrips2D(
-                    [[f[0], f[1]], [f[1], f[2], f[3]], [f[1], f[4], f[5]]],
-                    colors=[(90, 90, 90), (40, 110, 220), (230, 140, 30)],
-                    radii=0.006,
-                ),
-            )
+        shown = np.arange(0, n, every)
+        m = len(shown)
+        # one row per picture, three strips per row: trunk, left leg, right leg (one call per trial)
+        strips = [f[idx] for f in frames[shown] for idx in _WALKER_STRIPS]
+        rec.send_columns(
+            f"{self.entity}/walker",
+            [rr.TimeColumn("sim_time", duration=times[shown]), rr.TimeColumn("trial", sequence=np.full(m, trial_id))],
+            rr.LineStrips2D.columns(
+                strips=strips, colors=np.tile(_WALKER_COLORS, (m, 1)), radii=np.full(3 * m, 0.006)
+            ).partition(np.full(m, 3)),
+        )
         x0 = float(frames[0, 1, 0]) - 0.5
         x1 = float(frames[-1, 1, 0]) + 0.5
         gx = np.linspace(x0, x1, 60)
