@@ -63,13 +63,17 @@ class ReflexParams(ModuleParams):
     control_dt: float = Field(0.01, gt=0, description="tick length, s (must match the body)")
 
 
-# sensor-neuron inputs phi = sign * sensor (hips 0-1, knees 2-3), in the order of the sensor vector
+# The ten sensor neurons, [left, right] per kind: hip extensor E, hip flexor F, stretch receptor AS,
+# knee extensor E, knee flexor F. Each reads phi = sign * sensors[_PHI] (sensors 0-1 hips, 2-3 knees);
+# the flexor sensors read the negated angle.
 _PHI = np.array([0, 1, 0, 1, 0, 1, 2, 3, 2, 3])
 _SIGN = np.array([1.0, 1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0])
-_T2 = np.array([0, 1, 2, 3, 4, 5, 4, 5])  # hip E -> hip EM, hip F -> hip FM, AS -> knee EM and FM
-_T3 = np.array([0, 1, 0, 1, 6, 7, 8, 9])  # knee E -> knee EM, knee F -> knee FM (weights 0 at the hips)
-_EM = np.array([0, 1, 4, 5])
-_FM = np.array([2, 3, 6, 7])
+# The eight motor neurons, [left, right] per kind: hip EM, hip FM, knee EM, knee FM. Their sensor
+# inputs (Fig. 3.7 (c), (d)) come in two terms, so that each sum keeps the thesis's order:
+_T2 = np.array([0, 1, 2, 3, 4, 5, 4, 5])  # hip E -> hip EM, hip F -> hip FM, AS -> knee EM and knee FM
+_T3 = np.array([0, 1, 0, 1, 6, 7, 8, 9])  # knee E -> knee EM, knee F -> knee FM (weight 0 at the hips)
+_EM = np.array([0, 1, 4, 5])  # extensor motor neurons of [hip l, hip r, knee l, knee r]
+_FM = np.array([2, 3, 6, 7])  # flexor motor neurons of the same joints
 
 
 def sensor_neuron(alpha, theta, phi):
