@@ -95,49 +95,47 @@ class Packed(typing.NamedTuple):
     make: Any  # (scalars, vector) -> message
 
 
+def _slot_filler(cls, signature: str, values: dict[str, str], namespace: dict[str, Any], target: str = "m"):
+    """Compile ``def f(signature)`` that sets each slot of ``target`` (``self``, or a new ``cls``
+    it returns) through the slot's descriptor to the expression ``values[field]``. A frozen
+    dataclass's own ``__init__`` goes through ``object.__setattr__`` per field and costs about
+    twice as much, on every message the runtime builds (two per control tick)."""
+    namespace = {**namespace, "new": object.__new__, "cls": cls}
+    lines = [f"def f({signature}):"] + (["    m = new(cls)"] if target == "m" else [])
+    for name, value in values.items():
+        namespace[f"set_{name}"] = cls.__dict__[name].__set__
+        lines.append(f"    set_{name}({target}, {value})")
+    lines.append("    return m" if target == "m" else "    return None")
+    exec("\n".join(lines), namespace)
+    return namespace["f"]
+
+
+def _slot_init(cls) -> None:
+    """Give a frozen slotted dataclass a faster ``__init__`` with the same keyword-only signature."""
+    fields = dataclasses.fields(cls)
+    if hasattr(cls, "__post_init__") or any(f.default_factory is not dataclasses.MISSING for f in fields):
+        return
+    defaults = {f"default_{f.name}": f.default for f in fields if f.default is not dataclasses.MISSING}
+    params = [f.name if f.default is dataclasses.MISSING else f"{f.name}=default_{f.name}" for f in fields]
+    signature = f"self, *, {', '.join(params)}" if params else "self"
+    init = _slot_filler(cls, signature, {f.name: f.name for f in fields}, defaults, target="self")
+    init.__name__, init.__qualname__ = "__init__", f"{cls.__qualname__}.__init__"
+    cls.__init__ = init
+
+
 def _packed_layout(cls, names: tuple[str, ...], hints: dict) -> Packed:
     *scalars, vector = names
     codes = {int: "q", float: "d"}
     if hints[vector] is not np.ndarray or any(hints[n] not in codes for n in scalars):
         raise TypeError(f"{cls.__name__}: packed messages are int/float fields then one np.ndarray")
-    tag = cls.TAG.encode()
-    prefix = bytes((_PACKED_MARK, SCHEMA_VERSION, len(tag))) + tag
     if hasattr(cls, "__post_init__"):
         raise TypeError(f"{cls.__name__}: packed messages cannot have __post_init__")
-    # maker(scalars, vector) -> a message: fills the slots directly, a third of the cost of the
-    # frozen dataclass's __init__ (the field types were checked when the payload was unpacked)
-    namespace = {"new": object.__new__, "cls": cls}
-    lines = ["def make(s, v):", "    m = new(cls)"]
-    for i, n in enumerate(names):
-        namespace[f"set_{n}"] = cls.__dict__[n].__set__
-        lines.append(f"    set_{n}(m, {'v' if n == vector else f's[{i}]'})")
-    exec("\n".join([*lines, "    return m"]), namespace)
+    tag = cls.TAG.encode()
+    prefix = bytes((_PACKED_MARK, SCHEMA_VERSION, len(tag))) + tag
+    # make(scalars, vector): the field types were checked when the payload was unpacked
+    make = _slot_filler(cls, "s, v", {n: "v" if n == vector else f"s[{i}]" for i, n in enumerate(names)}, {})
     layout = struct.Struct("<" + "".join(codes[hints[n]] for n in scalars))
-    return Packed(prefix, layout, operator.attrgetter(*scalars), vector, namespace["make"])
-
-
-def _slot_init(cls) -> None:
-    """Give a frozen slotted dataclass an ``__init__`` with the same signature that fills the slots
-    through their descriptors: the dataclass's own goes through ``object.__setattr__`` per field
-    and costs twice as much, on every message the runtime builds (two per control tick)."""
-    fields = dataclasses.fields(cls)
-    if hasattr(cls, "__post_init__") or any(f.default_factory is not dataclasses.MISSING for f in fields):
-        return
-    namespace: dict[str, Any] = {}
-    params, lines = [], []
-    for f in fields:
-        namespace[f"set_{f.name}"] = cls.__dict__[f.name].__set__
-        if f.default is dataclasses.MISSING:
-            params.append(f.name)
-        else:
-            namespace[f"default_{f.name}"] = f.default
-            params.append(f"{f.name}=default_{f.name}")
-        lines.append(f"    set_{f.name}(self, {f.name})")
-    signature = f"self, *, {', '.join(params)}" if params else "self"
-    exec(f"def __init__({signature}):\n" + "\n".join(lines or ["    pass"]), namespace)
-    init = namespace["__init__"]
-    init.__qualname__ = f"{cls.__qualname__}.__init__"
-    cls.__init__ = init
+    return Packed(prefix, layout, operator.attrgetter(*scalars), vector, make)
 
 
 def message(tag: str, *, stream: bool = False, packed: bool = False):

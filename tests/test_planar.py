@@ -256,16 +256,16 @@ class SlowOnce(ReflexController):
 
     hung = False
 
-    def step(self, sensors):
-        if not SlowOnce.hung and getattr(self, "_ticks", 0) == 50:
-            SlowOnce.hung = True
-            time.sleep(2.0)
-        self._ticks = getattr(self, "_ticks", 0) + 1
-        return super().step(sensors)
-
     def configure(self, params, seed):
         self._ticks = 0
         super().configure(params, seed)
+
+    def step(self, sensors):
+        if self._ticks == 50 and not SlowOnce.hung:
+            SlowOnce.hung = True
+            time.sleep(2.0)
+        self._ticks += 1
+        return super().step(sensors)
 '''
 
 
