@@ -31,8 +31,9 @@ def wait_alive(session, key: str, timeout: float = 30.0) -> None:
     raise RuntimeError(f"{key} not alive")
 
 
-def controller_spec(run_id: str, reference: str, endpoint: str) -> dict:
-    """Host spec of a controller process that answers a body named ``body`` on ``endpoint``."""
+def controller_spec(run_id: str, reference: str, endpoint: str, cpus: list[int] | None = None) -> dict:
+    """Host spec of a controller process that answers a body named ``body`` on ``endpoint``,
+    pinned to ``cpus`` as ``sfl run`` pins a controller process (None: not pinned)."""
     return {
         "run_id": run_id,
         "instance": "controller",
@@ -46,4 +47,5 @@ def controller_spec(run_id: str, reference: str, endpoint: str) -> dict:
         "rrd": None,
         "viewer": None,
         "tick_timeout": 10.0,
+        "cpus": cpus,
     }

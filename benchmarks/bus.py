@@ -1,6 +1,10 @@
 """Lockstep round trip per control tick: raw Zenoh vs the framework's body<->controller link vs one process.
 
-    python benchmarks/bus.py [--ticks 10000] [--blocks 20]
+    python benchmarks/bus.py [--ticks 10000] [--blocks 20] [--no-pin]
+
+Every ping runs on one core and every pong on another, as ``sfl run`` places a body worker and
+its controller process (``pin_cpus``, see ``sfl_brain.placement``); ``--no-pin`` leaves them all
+to the scheduler.
 
 (raw) a bare Zenoh pub/sub ping-pong between two processes (100-byte payload), both sides
     blocking in a ring channel's recv() (the fastest bare pattern on this machine): the
@@ -22,6 +26,7 @@ It also times ``sfl run`` start-up (five module processes) to the first trial.
 from __future__ import annotations
 
 import argparse
+import json
 import subprocess
 import sys
 import textwrap
@@ -39,11 +44,14 @@ from sfl_brain import bus  # noqa: E402
 from sfl_brain.body import InProcessLink  # noqa: E402
 from sfl_brain.host import BusLink  # noqa: E402
 from sfl_brain.messages import ControllerReset, SensorFrame, decode, encode  # noqa: E402
+from sfl_brain.placement import assign, pin, usable_cpus  # noqa: E402
 
 PONG = textwrap.dedent("""
-    import sys, zenoh
+    import json, sys, zenoh
     sys.path.insert(0, {root!r})
     from sfl_brain import bus
+    from sfl_brain.placement import pin
+    pin(json.loads(sys.argv[2]))
     s = bus.open_session(["tcp/127.0.0.1:0"], [sys.argv[1]])
     sub = s.declare_subscriber("bench/ping", zenoh.handlers.RingChannel(64))
     pub = s.declare_publisher("bench/pong")
@@ -56,9 +64,11 @@ PONG = textwrap.dedent("""
 """)
 # zenoh-python's examples/z_pong.py, on its own keys
 PONG_EXAMPLE = textwrap.dedent("""
-    import sys, threading, zenoh
+    import json, sys, threading, zenoh
     sys.path.insert(0, {root!r})
     from sfl_brain import bus
+    from sfl_brain.placement import pin
+    pin(json.loads(sys.argv[2]))
     s = bus.open_session(["tcp/127.0.0.1:0"], [sys.argv[1]])
     done = threading.Event()
     pub = s.declare_publisher("bench/ex/pong", congestion_control=zenoh.CongestionControl.BLOCK)
@@ -72,14 +82,16 @@ PONG_EXAMPLE = textwrap.dedent("""
 """)
 # (typed): the raw pong with the framework's codec and the open-loop controller, by hand
 PONG_TYPED = textwrap.dedent("""
-    import sys, zenoh
+    import json, sys, zenoh
     sys.path.insert(0, {root!r})
     from sfl_brain import bus
+    from sfl_brain.placement import pin
     from sfl_brain.messages import ControllerReset, decode, encode
     from modules.controllers.open_loop import OpenLoopController
     controller = OpenLoopController()
     controller.handle(ControllerReset(trial_id=0, seed=0, params={{}}, sensors=["s"] * 8,
                                       commands=list(controller.COMMANDS)))
+    pin(json.loads(sys.argv[2]))
     s = bus.open_session(["tcp/127.0.0.1:0"], [sys.argv[1]])
     sub = s.declare_subscriber("bench/typed/ping", zenoh.handlers.RingChannel(64))
     pub = s.declare_publisher("bench/typed/pong")
@@ -99,14 +111,14 @@ class Raw:
     a ring channel's recv(). ``example``: zenoh-python's z_ping/z_pong (callback pong, FIFO ping).
     ``typed``: the raw pattern with the framework's messages, codec and controller, by hand."""
 
-    def __init__(self, session, endpoint, kind="raw"):
+    def __init__(self, session, endpoint, kind, cpus):
         root = str(Path(__file__).resolve().parents[1])
         prefix, script = {
             "raw": ("bench", PONG),
             "example": ("bench/ex", PONG_EXAMPLE),
             "typed": ("bench/typed", PONG_TYPED),
         }[kind]
-        self.proc = subprocess.Popen([sys.executable, "-c", script.format(root=root), endpoint])
+        self.proc = subprocess.Popen([sys.executable, "-c", script.format(root=root), endpoint, json.dumps(cpus)])
         wait_alive(session, f"{prefix}/pong")
         if kind == "example":
             self.pub = session.declare_publisher(f"{prefix}/ping", congestion_control=zenoh.CongestionControl.BLOCK)
@@ -146,9 +158,10 @@ class Raw:
 class Framework:
     """The body's BusLink to an open-loop controller hosted by ``sfl_brain.host``."""
 
-    def __init__(self, session, endpoint):
+    def __init__(self, session, endpoint, cpus):
         run_id = "benchbus"
-        self.proc = spawn_host(controller_spec(run_id, "modules.controllers.open_loop:OpenLoopController", endpoint))
+        reference = "modules.controllers.open_loop:OpenLoopController"
+        self.proc = spawn_host(controller_spec(run_id, reference, endpoint, cpus))
         wait_alive(session, bus.alive_key(run_id, "controller"))
         self.link = BusLink(session, run_id, "body", "controller", 10.0)
         self.link.reset(ControllerReset(trial_id=0, seed=0, params={}, sensors=SENSORS, commands=COMMANDS))
@@ -212,14 +225,19 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--ticks", type=int, default=10000)
     parser.add_argument("--blocks", type=int, default=20)
+    parser.add_argument("--no-pin", action="store_true", help="leave every process to the scheduler")
     args = parser.parse_args()
+    # every variant placed as sfl run places a body and its controller process (pin_cpus)
+    cpus = usable_cpus()
+    placed = {} if args.no_pin else assign(["body", "controller"], cpus)
+    pin(placed.get("body"))
     endpoint = bus.free_endpoint()
     session = bus.open_session([endpoint], [])
     sides = {}
     try:
         for kind in ("raw", "example", "typed"):
-            sides[kind] = Raw(session, endpoint, kind)
-        sides["framework"] = Framework(session, endpoint)
+            sides[kind] = Raw(session, endpoint, kind, placed.get("controller"))
+        sides["framework"] = Framework(session, endpoint, placed.get("controller"))
         times = {kind: [] for kind in sides}
         blocks = {kind: [] for kind in sides}  # the median of each block
         for side in sides.values():
@@ -238,7 +256,8 @@ def main() -> None:
     paired = np.array(blocks["framework"]) / np.array(blocks["raw"])
     over_typed = np.array(blocks["framework"]) / np.array(blocks["typed"])
     local = in_process_round_trips(args.ticks)
-    print(f"lockstep round trip per tick, {args.ticks} ticks")
+    where = f"pinned: ping {placed['body']}, pong {placed['controller']}" if placed else "unpinned"
+    print(f"lockstep round trip per tick, {args.ticks} ticks, {where}")
     print(f"  raw zenoh pub/sub (2 processes)      {stats(raw_t)}")
     print(f"  zenoh's z_ping/z_pong (2 processes)  {stats(example_t)}")
     print(f"  typed messages by hand (2 processes) {stats(typed_t)}")
@@ -258,6 +277,7 @@ def main() -> None:
         f"  framework / typed messages by hand, block by block: median {q2:.2f}, IQR {q1:.2f}-{q3:.2f}; "
         f"by hand, the typed messages add {(np.median(typed_t) - np.median(raw_t)) * 1e6:.1f} us per tick to raw"
     )
+    pin(cpus)  # sfl run places its own processes
     s = startup()
     print(
         f"sfl run start-up, 5 module processes: ready {np.median(s[:, 0]):.2f} s, first trial done "

@@ -3,7 +3,8 @@
     python benchmarks/planar.py [--repeats 5] [--grid 15]
 
 (a) physics only, fixed open-loop command; (b) reflexive controller and body in one process;
-(c) controller and body as two processes over Zenoh (lockstep, 1000 ticks);
+(c) controller and body as two processes over Zenoh (lockstep, 1000 ticks), placed as ``sfl run``
+    places them (``pin_cpus``: body and controller on two different cores), and again unpinned;
 then a sweep of a grid x grid subset of the E3.1 grid with 1 and with 2 body workers, with the
 controllers colocated in the body workers and as separate processes.
 """
@@ -27,6 +28,7 @@ from sfl_brain import bus  # noqa: E402
 from sfl_brain.body import InProcessLink  # noqa: E402
 from sfl_brain.host import BusLink  # noqa: E402
 from sfl_brain.messages import TrialRequest  # noqa: E402
+from sfl_brain.placement import assign, pin, usable_cpus  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 REQUEST = TrialRequest(
@@ -61,9 +63,9 @@ def one_process() -> float:
 class Processes:
     """(c): the body here, the reflex controller hosted in its own process, lockstep over Zenoh."""
 
-    def __init__(self, session, endpoint) -> None:
-        run_id = "benchplanar"
-        self.proc = spawn_host(controller_spec(run_id, "modules.controllers.reflex:ReflexController", endpoint))
+    def __init__(self, session, endpoint, run_id, cpus) -> None:
+        reference = "modules.controllers.reflex:ReflexController"
+        self.proc = spawn_host(controller_spec(run_id, reference, endpoint, cpus))
         wait_alive(session, bus.alive_key(run_id, "controller"))
         self.body = PlanarBiped()
         self.body.link = BusLink(session, run_id, "body", "controller", 10.0)
@@ -109,23 +111,38 @@ def main() -> None:
     args = parser.parse_args()
     endpoint = bus.free_endpoint()
     session = bus.open_session([endpoint], [])
-    a, b, c = [], [], []
+    cpus = usable_cpus()
+    placed = assign(["body", "controller"], cpus)  # as sfl run places one body worker and its controller
+    a, b, c, free = [], [], [], []
     try:
-        over_zenoh = Processes(session, endpoint)
-        over_zenoh.trial()  # warm up
-        for _ in range(args.repeats):  # interleaved, so that all three see the same machine load
+        pinned = Processes(session, endpoint, "benchplanar", placed.get("controller"))
+        unpinned = Processes(session, endpoint, "benchplanar-free", None)
+        for _ in range(args.repeats):  # interleaved, so that all see the same machine load
+            pin(placed.get("body", cpus))
+            if not a:
+                pinned.trial()  # warm up
             a.append(physics_only())
             b.append(one_process())
-            c.append(over_zenoh.trial())
-        over_zenoh.close()
+            c.append(pinned.trial())
+            pin(cpus)
+            if not free:
+                unpinned.trial()
+            free.append(unpinned.trial())
+        pinned.close()
+        unpinned.close()
     finally:
+        pin(cpus)
         session.close()
-    a, b, c = np.median(a), np.median(b), np.median(c)
+    a, b, c, free = np.median(a), np.median(b), np.median(c), np.median(free)
     print(f"one 10-s trial (1000 control ticks, 10 000 physics steps), median of {args.repeats}, interleaved:")
     print(f"  (a) physics only, open loop         {a * 1e3:7.1f} ms  ({10 / a:5.1f}x real time)")
     print(f"  (b) controller + body, one process  {b * 1e3:7.1f} ms  ({10 / b:5.1f}x real time)")
     print(f"  (c) controller + body over Zenoh    {c * 1e3:7.1f} ms  ({10 / c:5.1f}x real time; goal >= 20x)")
     print(f"  (c)/(b) = {c / b:.2f} (goal <= 1.5)   (b)/(a) = {b / a:.2f}")
+    print(
+        f"  (c) with both processes unpinned ({len(cpus)} usable cores: {cpus}): {free * 1e3:.1f} ms, "
+        f"(c unpinned)/(b) = {free / b:.2f}"
+    )
     print(f"  500 walking trials at (c): <= {500 * c:.0f} s (goal: E3.2 under 240 s; falls end trials early)")
     n = args.grid**2
     print(f"sweep of {n} grid points (E3.1 subset), whole sfl run including start-up:")

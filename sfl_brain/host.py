@@ -30,6 +30,7 @@ from . import bus
 from .body import Body, InProcessLink
 from .messages import ControllerReset, Message, MessageError, MotorCommand, SensorFrame, decode, encode
 from .module import Module
+from .placement import pin
 from .registry import resolve
 
 log = logging.getLogger("sfl.host")
@@ -353,6 +354,9 @@ def main(argv: list[str] | None = None) -> int:
         format=f"%(asctime)s {spec['instance']} %(levelname)s %(message)s",
         stream=sys.stderr,
     )
+    if spec.get("cpus"):
+        pin(spec["cpus"])  # before the session's threads start: they inherit it
+        log.info("pinned to cores %s", sorted(os.sched_getaffinity(0)))
     host = Host(spec)
     # SIGTERM: the main thread may sit in a trial (blocked in Rust), where Python handlers do not run;
     # the C handler writes to a wakeup fd, and a thread that reads it stops the host at once

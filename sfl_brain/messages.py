@@ -19,7 +19,6 @@ and drops such input, it never crashes on it.
 from __future__ import annotations
 
 import dataclasses
-import operator
 import struct
 import types
 import typing
@@ -82,32 +81,40 @@ def _checker(annotation: Any):
 
 
 _PACKED_MARK = 0xC1
-_PACKED_REGISTRY: dict[bytes, type[Message]] = {}
+_F8 = np.dtype("<f8")
+#: the decoders of packed messages by their prefix (mark, schema version, tag length, tag)
+_PACKED_DECODERS: dict[bytes, Any] = {}
 
 
 class Packed(typing.NamedTuple):
-    """How a ``packed=True`` message is laid out: ``prefix | scalars | vector``."""
+    """How a ``packed=True`` message is laid out: ``prefix | scalars | vector``, with an encoder
+    and a decoder compiled for its fields (the control tick runs each of them twice)."""
 
     prefix: bytes  # 0xC1, schema version, tag length, tag
     scalars: struct.Struct  # the int/float fields, little-endian int64/float64
-    get_scalars: Any  # message -> tuple of its scalar fields
     vector: str  # the name of the float64 vector field
-    make: Any  # (scalars, vector) -> message
+    encode: Any  # message -> bytes, or None when a field does not fit the layout (msgpack then)
+    decode: Any  # payload -> message, or None when the payload does not fit the layout
 
 
-def _slot_filler(cls, signature: str, values: dict[str, str], namespace: dict[str, Any], target: str = "m"):
-    """Compile ``def f(signature)`` that sets each slot of ``target`` (``self``, or a new ``cls``
-    it returns) through the slot's descriptor to the expression ``values[field]``. A frozen
-    dataclass's own ``__init__`` goes through ``object.__setattr__`` per field and costs about
-    twice as much, on every message the runtime builds (two per control tick)."""
+def _compile(lines: list[str], namespace: dict[str, Any]):
+    exec("\n".join(lines), namespace)
+    return namespace["f"]
+
+
+def _slot_filler(cls, signature: str, values: dict[str, str], namespace: dict[str, Any], target="m", head=()):
+    """Compile ``def f(signature)`` that runs the lines ``head``, then sets each slot of
+    ``target`` (``self``, or a new ``cls`` it returns) through the slot's descriptor to the
+    expression ``values[field]``. A frozen dataclass's own ``__init__`` goes through
+    ``object.__setattr__`` per field and costs about twice as much, on every message the
+    runtime builds (two per control tick)."""
     namespace = {**namespace, "new": object.__new__, "cls": cls}
-    lines = [f"def f({signature}):"] + (["    m = new(cls)"] if target == "m" else [])
+    lines = [f"def f({signature}):", *head] + (["    m = new(cls)"] if target == "m" else [])
     for name, value in values.items():
         namespace[f"set_{name}"] = cls.__dict__[name].__set__
         lines.append(f"    set_{name}({target}, {value})")
     lines.append("    return m" if target == "m" else "    return None")
-    exec("\n".join(lines), namespace)
-    return namespace["f"]
+    return _compile(lines, namespace)
 
 
 def _slot_init(cls) -> None:
@@ -132,10 +139,29 @@ def _packed_layout(cls, names: tuple[str, ...], hints: dict) -> Packed:
         raise TypeError(f"{cls.__name__}: packed messages cannot have __post_init__")
     tag = cls.TAG.encode()
     prefix = bytes((_PACKED_MARK, SCHEMA_VERSION, len(tag))) + tag
-    # make(scalars, vector): the field types were checked when the payload was unpacked
-    make = _slot_filler(cls, "s, v", {n: "v" if n == vector else f"s[{i}]" for i, n in enumerate(names)}, {})
     layout = struct.Struct("<" + "".join(codes[hints[n]] for n in scalars))
-    return Packed(prefix, layout, operator.attrgetter(*scalars), vector, make)
+    start = len(prefix) + layout.size
+    namespace = {"prefix": prefix, "pack": layout.pack, "unpack": layout.unpack_from, "error": struct.error}
+    namespace |= {"ndarray": np.ndarray, "F8": _F8}
+    encoder = _compile(
+        [
+            "def f(m):",
+            f"    v = m.{vector}",
+            "    if type(v) is ndarray and v.dtype == F8 and v.ndim == 1:",
+            "        try:",
+            f"            return prefix + pack({', '.join(f'm.{n}' for n in scalars)}) + v.tobytes()",
+            "        except error:",  # a scalar of another type: the general layout reports it
+            "            pass",
+            "    return None",
+        ],
+        dict(namespace),
+    )
+    # the field types need no check: unpacking the scalars and viewing the vector make them
+    head = [f"    n = len(data) - {start}", "    if n < 0 or n & 7:", "        return None"]
+    head.append(f"    s = unpack(data, {len(prefix)})")
+    values = {n: f"ndarray(n >> 3, F8, data, {start})" if n == vector else f"s[{i}]" for i, n in enumerate(names)}
+    decoder = _slot_filler(cls, "data", values, namespace, head=head)
+    return Packed(prefix, layout, vector, encoder, decoder)
 
 
 def message(tag: str, *, stream: bool = False, packed: bool = False):
@@ -162,7 +188,7 @@ def message(tag: str, *, stream: bool = False, packed: bool = False):
         _REGISTRY[tag] = cls
         if packed:
             cls._PACKED = _packed_layout(cls, names, hints)
-            _PACKED_REGISTRY[tag.encode()] = cls
+            _PACKED_DECODERS[cls._PACKED.prefix] = cls._PACKED.decode
         return cls
 
     return wrap
@@ -219,42 +245,36 @@ def _ext_hook(code: int, data: bytes) -> Any:
     return np.frombuffer(data, dtype=dtype, offset=offset).reshape(shape)
 
 
-_F8 = np.dtype("<f8")
-
-
 def encode(msg: Message) -> bytes:
     """Serialise a registered message to bytes."""
     packed = msg._PACKED
     if packed is not None:
-        vector = getattr(msg, packed.vector)
-        if type(vector) is np.ndarray and vector.dtype == _F8 and vector.ndim == 1:
-            try:
-                return packed.prefix + packed.scalars.pack(*packed.get_scalars(msg)) + vector.tobytes()
-            except struct.error:
-                pass  # a scalar of another type: the general layout reports it
+        data = packed.encode(msg)
+        if data is not None:
+            return data
     return msgpack.packb([SCHEMA_VERSION, msg.TAG, [getattr(msg, name) for name in msg._FIELDS]], default=_default)
 
 
-def _decode_packed(data: bytes) -> Message:
+def _packed_error(data: bytes) -> MessageError:
+    """Why a payload that starts with 0xC1 is not a packed message."""
     if len(data) < 3:
-        raise MessageError(f"packed payload of {len(data)} bytes is too short")
+        return MessageError(f"packed payload of {len(data)} bytes is too short")
     if data[1] != SCHEMA_VERSION:
-        raise MessageError(f"schema version {data[1]}, this side speaks {SCHEMA_VERSION}")
-    end = 3 + data[2]
-    cls = _PACKED_REGISTRY.get(data[3:end])
-    if cls is None:
-        raise MessageError(f"unknown packed message tag {data[3:end]!r}")
-    packed = cls._PACKED
-    start = end + packed.scalars.size
-    if len(data) < start or (len(data) - start) % 8:
-        raise MessageError(f"{cls.TAG}: packed payload of {len(data)} bytes does not fit its layout")
-    return packed.make(packed.scalars.unpack_from(data, end), np.frombuffer(data, _F8, offset=start))
+        return MessageError(f"schema version {data[1]}, this side speaks {SCHEMA_VERSION}")
+    tag = data[3 : 3 + data[2]]
+    if data[: 3 + data[2]] not in _PACKED_DECODERS:
+        return MessageError(f"unknown packed message tag {tag!r}")
+    return MessageError(f"{tag.decode()}: packed payload of {len(data)} bytes does not fit its layout")
 
 
 def decode(data: bytes) -> Message:
     """Turn bytes back into a message, or raise :class:`MessageError` saying why not."""
     if data[:1] == b"\xc1":
-        return _decode_packed(data)
+        decoder = _PACKED_DECODERS.get(data[: 3 + data[2]]) if len(data) > 2 else None
+        msg = decoder(data) if decoder is not None else None
+        if msg is None:
+            raise _packed_error(data)
+        return msg
     try:
         obj = _unpackb(data, ext_hook=_ext_hook, strict_map_key=False)
     except MessageError:

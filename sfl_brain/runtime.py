@@ -27,6 +27,7 @@ import zenoh
 
 from . import bus
 from .messages import Message, MessageError, decode, encode
+from .placement import assign, usable_cpus
 from .scenario import Instance, Plan
 
 log = logging.getLogger("sfl.runtime")
@@ -117,6 +118,8 @@ class Supervisor:
         self.session: zenoh.Session | None = None
         self._liveliness = None
         self.external_workers: list[str] = []
+        # one core for each body worker and controller process, if there are enough of them
+        self.placement = assign(plan.lockstep_processes, usable_cpus()) if plan.scenario.pin_cpus else {}
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:
@@ -157,6 +160,7 @@ class Supervisor:
             "realtime": self.realtime,
             "tick_timeout": self.plan.scenario.timeouts.tick,
             "colocated": hosted_spec(colocated),
+            "cpus": self.placement.get(inst.name),
         }
         return spec
 

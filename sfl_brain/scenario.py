@@ -111,6 +111,11 @@ class ScenarioModel(Strict):
     modules: dict[str, ModuleSpec] = Field(min_length=1)
     record: Record = Record()
     timeouts: Timeouts = Timeouts()
+    pin_cpus: bool = Field(
+        True,
+        description="pin each body worker and its controller process to two different cores "
+        "(sfl_brain.placement); false leaves every process to the OS scheduler",
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -260,6 +265,13 @@ class Plan:
     @property
     def dim(self) -> int:
         return len(self.scenario.space)
+
+    @property
+    def lockstep_processes(self) -> list[str]:
+        """The processes that exchange a message every control tick: each body worker, followed
+        by its controller's process unless the controller is colocated in the body worker."""
+        controller_of = {i.routes[m.MotorCommand.TAG]: i.name for i in self.instances if m.MotorCommand.TAG in i.routes}
+        return [name for body in self.bodies for name in (body, controller_of.get(body)) if name]
 
     def to_physical(self, unit: np.ndarray) -> dict[str, dict[str, float]]:
         """Map a unit vector to {'controller': {...}, 'body': {...}} physical parameters."""

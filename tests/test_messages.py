@@ -23,6 +23,7 @@ def test_roundtrip_keeps_arrays_and_types():
         (b"\xc1garbage", "schema version 103"),
         (b"\xc1", "too short"),
         (m.encode(m.SensorFrame(trial_id=1, tick=2, values=np.zeros(3)))[:-3], "does not fit its layout"),
+        (m.encode(m.SensorFrame(trial_id=1, tick=2, values=np.zeros(3)))[:30], "does not fit its layout"),
         (
             m.encode(m.SensorFrame(trial_id=1, tick=2, values=np.zeros(3))).replace(b"controller", b"kontroller"),
             "unknown packed message tag",

@@ -9,6 +9,7 @@ from modules.controllers.reflex import ReflexController, sensor_neuron
 from sfl_brain.body import InProcessLink
 from sfl_brain.local import run_local
 from sfl_brain.messages import TrialRequest
+from sfl_brain.placement import usable_cpus
 from sfl_brain.records import read_records
 from sfl_brain.scenario import load
 
@@ -156,6 +157,13 @@ def test_learning_run_end_to_end_with_processes(tmp_path):
     assert counts["/trials/success"] == 12 and counts["/acc/success_map/neurons"] >= 12
     assert (out / "acc.npz").exists()
     assert np.load(out / "acc.npz")["success_weights"].shape == (100, 2)
+    # the body and its controller each ran on a core of its own (pin_cpus), as the OS reports it
+    logs = {name: (out / "logs" / f"{name}.log").read_text() for name in ("body", "controller", "acc")}
+    cpus = usable_cpus()
+    if len(cpus) >= 2:
+        assert f"pinned to cores [{cpus[0]}]" in logs["body"]
+        assert f"pinned to cores [{cpus[1]}]" in logs["controller"]
+    assert all("pinned" not in logs[name] for name in logs if len(cpus) < 2 or name == "acc")
 
 
 def test_exploit_walks_with_the_parameters_of_the_given_maps(tmp_path):

@@ -105,3 +105,20 @@ def test_cli_check_reports_yaml_syntax_errors(write_scenario):
 def test_set_overrides_are_validated_too():
     done = sfl("check", str(SCENARIOS / "analytic_learn.yaml"), "--set", "modules.acc.params.shape=[0, 3]")
     assert done.returncode == 2 and "modules.acc.params.shape.0" in done.stderr
+
+
+def test_lockstep_processes_get_a_core_each_only_when_there_are_enough():
+    from sfl_brain.placement import assign
+
+    quick = SCENARIOS / "quickstart.yaml"
+    assert load(quick).lockstep_processes == ["body", "controller"]  # ACC, vigilance, OFC are not pinned
+    two = load(quick, ["modules.body.workers=2"]).lockstep_processes
+    assert two == ["body.0", "controller.0", "body.1", "controller.1"]
+    assert load(quick, ["modules.body.workers=2", "modules.controller.colocate=true"]).lockstep_processes == [
+        "body.0",
+        "body.1",
+    ]
+    assert load(SCENARIOS / "analytic_learn.yaml").lockstep_processes == ["body"]
+    assert assign(["body", "controller"], [2, 5]) == {"body": [2], "controller": [5]}
+    assert assign(two, [0, 1]) == {}  # four lockstep processes on two cores: left to the scheduler
+    assert assign(["body"], [3]) == {}  # one core: nothing to separate
