@@ -1,10 +1,9 @@
 """Lockstep round trip per control tick: raw Zenoh vs the framework's body<->controller link vs one process.
 
-    python benchmarks/bus.py [--ticks 10000] [--blocks 20] [--no-pin]
+    python benchmarks/bus.py [--ticks 10000] [--blocks 20] [--pin auto|always|never]
 
-Every ping runs on one core and every pong on another, as ``sfl run`` places a body worker and
-its controller process (``pin_cpus``, see ``sfl_brain.placement``); ``--no-pin`` leaves them all
-to the scheduler.
+The pings and pongs are placed as ``sfl run`` places a body worker and its controller process
+under ``pin_cpus`` ``--pin`` (default ``auto``; see ``sfl_brain.placement``).
 
 (raw) a bare Zenoh pub/sub ping-pong between two processes (100-byte payload), both sides
     blocking in a ring channel's recv() (the fastest bare pattern on this machine): the
@@ -225,11 +224,11 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--ticks", type=int, default=10000)
     parser.add_argument("--blocks", type=int, default=20)
-    parser.add_argument("--no-pin", action="store_true", help="leave every process to the scheduler")
+    parser.add_argument("--pin", choices=["auto", "always", "never"], default="auto", help="pin_cpus, as in a scenario")
     args = parser.parse_args()
     # every variant placed as sfl run places a body and its controller process (pin_cpus)
     cpus = usable_cpus()
-    placed = {} if args.no_pin else assign(["body", "controller"], cpus)
+    placed = assign(["body", "controller"], cpus, args.pin)
     pin(placed.get("body"))
     endpoint = bus.free_endpoint()
     session = bus.open_session([endpoint], [])
@@ -256,7 +255,9 @@ def main() -> None:
     paired = np.array(blocks["framework"]) / np.array(blocks["raw"])
     over_typed = np.array(blocks["framework"]) / np.array(blocks["typed"])
     local = in_process_round_trips(args.ticks)
-    where = f"pinned: ping {placed['body']}, pong {placed['controller']}" if placed else "unpinned"
+    where = f"pin {args.pin}: " + (
+        f"ping on cores {placed['body']}, pong on {placed['controller']}" if placed else "not pinned"
+    )
     print(f"lockstep round trip per tick, {args.ticks} ticks, {where}")
     print(f"  raw zenoh pub/sub (2 processes)      {stats(raw_t)}")
     print(f"  zenoh's z_ping/z_pong (2 processes)  {stats(example_t)}")

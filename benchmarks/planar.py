@@ -1,10 +1,10 @@
 """Wall time of one 10-s trial of the planar walker, three ways, plus the parallel grid.
 
-    python benchmarks/planar.py [--repeats 5] [--grid 15]
+    python benchmarks/planar.py [--repeats 9] [--grid 15] [--pin auto|always|never]
 
 (a) physics only, fixed open-loop command; (b) reflexive controller and body in one process;
 (c) controller and body as two processes over Zenoh (lockstep, 1000 ticks), placed as ``sfl run``
-    places them (``pin_cpus``: body and controller on two different cores), and again unpinned;
+    places them under ``pin_cpus`` ``--pin`` (default ``auto``, as a scenario; the sweeps too);
 then a sweep of a grid x grid subset of the E3.1 grid with 1 and with 2 body workers, with the
 controllers colocated in the body workers and as separate processes.
 """
@@ -63,7 +63,8 @@ def one_process() -> float:
 class Processes:
     """(c): the body here, the reflex controller hosted in its own process, lockstep over Zenoh."""
 
-    def __init__(self, session, endpoint, run_id, cpus) -> None:
+    def __init__(self, session, endpoint, cpus) -> None:
+        run_id = "benchplanar"
         reference = "modules.controllers.reflex:ReflexController"
         self.proc = spawn_host(controller_spec(run_id, reference, endpoint, cpus))
         wait_alive(session, bus.alive_key(run_id, "controller"))
@@ -83,7 +84,7 @@ class Processes:
         self.proc.wait(timeout=10)
 
 
-def sweep(workers: int, grid: int, colocate: bool) -> float:
+def sweep(workers: int, grid: int, colocate: bool, pin_cpus: str) -> float:
     from sfl_brain.run import run
     from sfl_brain.scenario import load
 
@@ -95,6 +96,7 @@ def sweep(workers: int, grid: int, colocate: bool) -> float:
             f"space.1.steps={grid}",
             "record.body_every=0",
             f"modules.controller.colocate={str(colocate).lower()}",
+            f"pin_cpus={pin_cpus}",
         ],
     )
     with tempfile.TemporaryDirectory() as tmp:
@@ -108,41 +110,35 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--repeats", type=int, default=9)
     parser.add_argument("--grid", type=int, default=15)
+    parser.add_argument("--pin", choices=["auto", "always", "never"], default="auto", help="pin_cpus, as in a scenario")
     args = parser.parse_args()
     endpoint = bus.free_endpoint()
     session = bus.open_session([endpoint], [])
     cpus = usable_cpus()
-    placed = assign(["body", "controller"], cpus)  # as sfl run places one body worker and its controller
-    a, b, c, free = [], [], [], []
+    # as sfl run places one body worker (this process) and its controller process
+    placed = assign(["body", "controller"], cpus, args.pin)
+    pin(placed.get("body"))
+    a, b, c = [], [], []
     try:
-        pinned = Processes(session, endpoint, "benchplanar", placed.get("controller"))
-        unpinned = Processes(session, endpoint, "benchplanar-free", None)
-        for _ in range(args.repeats):  # interleaved, so that all see the same machine load
-            pin(placed.get("body", cpus))
-            if not a:
-                pinned.trial()  # warm up
+        over_zenoh = Processes(session, endpoint, placed.get("controller"))
+        over_zenoh.trial()  # warm up
+        for _ in range(args.repeats):  # interleaved, so that all three see the same machine load
             a.append(physics_only())
             b.append(one_process())
-            c.append(pinned.trial())
-            pin(cpus)
-            if not free:
-                unpinned.trial()
-            free.append(unpinned.trial())
-        pinned.close()
-        unpinned.close()
+            c.append(over_zenoh.trial())
+        over_zenoh.close()
     finally:
-        pin(cpus)
+        pin(cpus)  # sfl run places the sweeps' processes itself
         session.close()
-    a, b, c, free = np.median(a), np.median(b), np.median(c), np.median(free)
-    print(f"one 10-s trial (1000 control ticks, 10 000 physics steps), median of {args.repeats}, interleaved:")
+    a, b, c = np.median(a), np.median(b), np.median(c)
+    where = f"pin {args.pin}: " + (
+        f"body on cores {placed['body']}, controller on {placed['controller']}" if placed else "not pinned"
+    )
+    print(f"one 10-s trial (1000 control ticks, 10 000 physics steps), median of {args.repeats}, interleaved, {where}:")
     print(f"  (a) physics only, open loop         {a * 1e3:7.1f} ms  ({10 / a:5.1f}x real time)")
     print(f"  (b) controller + body, one process  {b * 1e3:7.1f} ms  ({10 / b:5.1f}x real time)")
     print(f"  (c) controller + body over Zenoh    {c * 1e3:7.1f} ms  ({10 / c:5.1f}x real time; goal >= 20x)")
     print(f"  (c)/(b) = {c / b:.2f} (goal <= 1.5)   (b)/(a) = {b / a:.2f}")
-    print(
-        f"  (c) with both processes unpinned ({len(cpus)} usable cores: {cpus}): {free * 1e3:.1f} ms, "
-        f"(c unpinned)/(b) = {free / b:.2f}"
-    )
     print(f"  500 walking trials at (c): <= {500 * c:.0f} s (goal: E3.2 under 240 s; falls end trials early)")
     n = args.grid**2
     print(f"sweep of {n} grid points (E3.1 subset), whole sfl run including start-up:")
@@ -150,8 +146,8 @@ def main() -> None:
         (True, "controller inside each body worker (colocate: true)"),
         (False, "controller as its own process per worker"),
     ):
-        one = sweep(1, args.grid, colocate)
-        two = sweep(2, args.grid, colocate)
+        one = sweep(1, args.grid, colocate, args.pin)
+        two = sweep(2, args.grid, colocate, args.pin)
         print(f"  {label}: 1 worker {one:.1f} s, 2 workers {two:.1f} s, speed-up {one / two:.2f}x (goal >= 1.7x)")
 
 

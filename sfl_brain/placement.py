@@ -1,19 +1,24 @@
-"""CPU placement: a body worker and its controller on different cores.
+"""CPU placement: a body worker and its controller on cores of their own.
 
 A lockstep pair takes turns: the body steps its physics while the controller waits for the
 next frame, then the controller computes while the body waits for its command. Left to the
-scheduler, the two processes (and their Zenoh threads) migrate between cores on every wake-up
-and start each tick with cold caches. Pinned to two different cores, each wakes where it slept.
-On the 2-core development machine this took a 10-s walker trial over Zenoh from 1.41-1.96x to
-1.38-1.39x the one-process time (``benchmarks/planar.py`` prints both).
+scheduler, the two processes (and their Zenoh threads) move between cores on wake-ups and
+start ticks with cold caches. Pinned to two different cores, each wakes where it slept: on the
+2-core development machine a 10-s walker trial over Zenoh took 1.37-1.39x the one-process time
+pinned, against 1.41-1.96x unpinned (``benchmarks/planar.py --pin always`` / ``never``).
 
-Pinning only helps when every lockstep process can have a core of its own. With more of them
-than cores (two body workers and two controller processes on two cores), a pinned controller
-must wait for the other pair's body to leave its core, and a sweep ran 1.11x faster with two
-workers instead of 1.35-1.54x unpinned. So the scenario's ``pin_cpus`` (default true) pins the
-body workers and their controller processes, one core each in that order, only when there are
-enough usable cores for all of them; the brain modules and the supervisor are left to the
-scheduler. Linux only (elsewhere a no-op).
+Pinning is fragile when the pinned processes take every core. A pinned process cannot move to
+the core its partner has left idle, so anything else that wants CPU (a Rerun viewer, another
+run, one busy loop) competes with it for its core at every tick: with one busy loop beside it,
+the same trial took 509 ms pinned against 210 ms unpinned. And with more lockstep processes
+than cores (two body workers and two controller processes on two cores) a sweep ran 1.11x
+faster with two workers, against 1.35-1.54x unpinned.
+
+So the scenario's ``pin_cpus`` is ``auto`` by default: the body workers and their controller
+processes get one core each, in that order, only if a core is left over for everything else;
+``always`` pins them whenever there are as many cores as lockstep processes (a machine kept
+for the run); ``never`` leaves everything to the scheduler. Brain modules and the supervisor
+are never pinned. Linux only (elsewhere a no-op).
 """
 
 from __future__ import annotations
@@ -29,10 +34,11 @@ def usable_cpus() -> list[int]:
     return list(range(os.cpu_count() or 1))
 
 
-def assign(lockstep: list[str], cpus: list[int]) -> dict[str, list[int]]:
-    """One core per lockstep process (``lockstep``: names in order), or none at all if the
-    cores are too few for that or there is nothing to separate."""
-    if len(lockstep) > len(cpus) or len(cpus) < 2:
+def assign(lockstep: list[str], cpus: list[int], mode: str = "auto") -> dict[str, list[int]]:
+    """One core per lockstep process (``lockstep``: names in order) under ``pin_cpus`` ``mode``,
+    or none at all: with ``never``, with a single core, or with too few cores for the mode."""
+    spare = {"auto": 1, "always": 0}.get(mode)
+    if spare is None or len(cpus) < 2 or len(lockstep) + spare > len(cpus):
         return {}
     return {name: [cpu] for name, cpu in zip(lockstep, cpus, strict=False)}
 

@@ -119,7 +119,7 @@ class Supervisor:
         self._liveliness = None
         self.external_workers: list[str] = []
         # one core for each body worker and controller process, if there are enough of them
-        self.placement = assign(plan.lockstep_processes, usable_cpus()) if plan.scenario.pin_cpus else {}
+        self.placement = assign(plan.lockstep_processes, usable_cpus(), plan.scenario.pin_cpus)
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:

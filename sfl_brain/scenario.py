@@ -111,10 +111,11 @@ class ScenarioModel(Strict):
     modules: dict[str, ModuleSpec] = Field(min_length=1)
     record: Record = Record()
     timeouts: Timeouts = Timeouts()
-    pin_cpus: bool = Field(
-        True,
-        description="pin each body worker and its controller process to two different cores "
-        "(sfl_brain.placement); false leaves every process to the OS scheduler",
+    pin_cpus: Literal["auto", "always", "never"] = Field(
+        "auto",
+        description="a core of its own for each body worker and controller process "
+        "(sfl_brain.placement): auto = only if a core is left over for the rest of the run, "
+        "always = whenever there are as many cores, never = leave it to the OS scheduler",
     )
 
 

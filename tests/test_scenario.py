@@ -119,6 +119,10 @@ def test_lockstep_processes_get_a_core_each_only_when_there_are_enough():
         "body.1",
     ]
     assert load(SCENARIOS / "analytic_learn.yaml").lockstep_processes == ["body"]
-    assert assign(["body", "controller"], [2, 5]) == {"body": [2], "controller": [5]}
-    assert assign(two, [0, 1]) == {}  # four lockstep processes on two cores: left to the scheduler
-    assert assign(["body"], [3]) == {}  # one core: nothing to separate
+    pair = ["body", "controller"]
+    assert assign(pair, [2, 5, 7]) == {"body": [2], "controller": [5]}  # a core left for the rest
+    assert assign(pair, [2, 5]) == {}  # auto: no core left for the brain modules, the viewer...
+    assert assign(pair, [2, 5], "always") == {"body": [2], "controller": [5]}
+    assert assign(pair, [2, 5, 7], "never") == {}
+    assert assign(two, [0, 1], "always") == {}  # four lockstep processes on two cores
+    assert assign(["body"], [3], "always") == {}  # one core: nothing to separate
