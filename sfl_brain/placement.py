@@ -28,10 +28,11 @@ from collections.abc import Iterable
 
 
 def usable_cpus() -> list[int]:
-    """The cores this process may run on (respects ``taskset`` and container limits)."""
+    """The cores this process may run on (respects ``taskset`` and container limits); empty
+    where the OS offers no CPU affinity (macOS, Windows), so that nothing is ever pinned there."""
     if hasattr(os, "sched_getaffinity"):
         return sorted(os.sched_getaffinity(0))
-    return list(range(os.cpu_count() or 1))
+    return []
 
 
 def assign(lockstep: list[str], cpus: list[int], mode: str = "auto") -> dict[str, list[int]]:
