@@ -1,9 +1,9 @@
 """Lockstep round trip per control tick: raw Zenoh vs the framework's body<->controller link vs one process.
 
-    python benchmarks/bus.py [--ticks 10000] [--blocks 20] [--pin auto|always|never]
+    python benchmarks/bus.py [--ticks 10000] [--blocks 20] [--pin never|auto|always]
 
 The pings and pongs are placed as ``sfl run`` places a body worker and its controller process
-under ``pin_cpus`` ``--pin`` (default ``auto``; see ``sfl_brain.placement``).
+under ``pin_cpus`` ``--pin`` (default ``never``, as a scenario; see ``sfl_brain.placement``).
 
 (raw) a bare Zenoh pub/sub ping-pong between two processes (100-byte payload), both sides
     blocking in a ring channel's recv() (the fastest bare pattern on this machine): the
@@ -224,7 +224,7 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--ticks", type=int, default=10000)
     parser.add_argument("--blocks", type=int, default=20)
-    parser.add_argument("--pin", choices=["auto", "always", "never"], default="auto", help="pin_cpus, as in a scenario")
+    parser.add_argument("--pin", choices=["never", "auto", "always"], default="never", help="pin_cpus")
     args = parser.parse_args()
     # every variant placed as sfl run places a body and its controller process (pin_cpus)
     cpus = usable_cpus()

@@ -1,10 +1,10 @@
 """Wall time of one 10-s trial of the planar walker, three ways, plus the parallel grid.
 
-    python benchmarks/planar.py [--repeats 9] [--grid 15] [--pin auto|always|never]
+    python benchmarks/planar.py [--repeats 9] [--grid 15] [--pin never|auto|always]
 
 (a) physics only, fixed open-loop command; (b) reflexive controller and body in one process;
 (c) controller and body as two processes over Zenoh (lockstep, 1000 ticks), placed as ``sfl run``
-    places them under ``pin_cpus`` ``--pin`` (default ``auto``, as a scenario; the sweeps too);
+    places them under ``pin_cpus`` ``--pin`` (default ``never``, as a scenario; the sweeps too);
 then a sweep of a grid x grid subset of the E3.1 grid with 1 and with 2 body workers, with the
 controllers colocated in the body workers and as separate processes.
 """
@@ -110,7 +110,7 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--repeats", type=int, default=9)
     parser.add_argument("--grid", type=int, default=15)
-    parser.add_argument("--pin", choices=["auto", "always", "never"], default="auto", help="pin_cpus, as in a scenario")
+    parser.add_argument("--pin", choices=["never", "auto", "always"], default="never", help="pin_cpus")
     args = parser.parse_args()
     endpoint = bus.free_endpoint()
     session = bus.open_session([endpoint], [])

@@ -14,11 +14,16 @@ the same trial took 509 ms pinned against 210 ms unpinned. And with more lockste
 than cores (two body workers and two controller processes on two cores) a sweep ran 1.11x
 faster with two workers, against 1.35-1.54x unpinned.
 
-So the scenario's ``pin_cpus`` is ``auto`` by default: the body workers and their controller
-processes get one core each, in that order, only if a core is left over for everything else;
-``always`` pins them whenever there are as many cores as lockstep processes (a machine kept
-for the run); ``never`` leaves everything to the scheduler. Brain modules and the supervisor
-are never pinned. Linux only (elsewhere a no-op).
+Nor can one run know which cores another run has pinned: two runs started side by side with
+the same ``pin_cpus`` would pin to the same cores and compete on them while other cores idle.
+
+So the scenario's ``pin_cpus`` is ``never`` by default, as in ROS 2 or dora, where pinning is the
+user's call. ``auto`` gives the body workers and their controller processes one core each, in that
+order, when a core is left over for everything else (the brain modules, the supervisor's logging,
+a viewer); ``always`` whenever there are as many cores as lockstep processes (a machine kept for the
+run). Both pin within the cores ``sfl run`` itself may use, so ``taskset -c 0-2 sfl run ...`` and
+``taskset -c 3-5 sfl run ...`` keep two runs apart. Brain modules and the supervisor are never
+pinned. Linux only (elsewhere a no-op).
 """
 
 from __future__ import annotations
@@ -35,7 +40,7 @@ def usable_cpus() -> list[int]:
     return []
 
 
-def assign(lockstep: list[str], cpus: list[int], mode: str = "auto") -> dict[str, list[int]]:
+def assign(lockstep: list[str], cpus: list[int], mode: str) -> dict[str, list[int]]:
     """One core per lockstep process (``lockstep``: names in order) under ``pin_cpus`` ``mode``,
     or none at all: with ``never``, with a single core, or with too few cores for the mode."""
     spare = {"auto": 1, "always": 0}.get(mode)

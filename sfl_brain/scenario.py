@@ -111,11 +111,11 @@ class ScenarioModel(Strict):
     modules: dict[str, ModuleSpec] = Field(min_length=1)
     record: Record = Record()
     timeouts: Timeouts = Timeouts()
-    pin_cpus: Literal["auto", "always", "never"] = Field(
-        "auto",
+    pin_cpus: Literal["never", "auto", "always"] = Field(
+        "never",
         description="a core of its own for each body worker and controller process "
-        "(sfl_brain.placement): auto = only if a core is left over for the rest of the run, "
-        "always = whenever there are as many cores, never = leave it to the OS scheduler",
+        "(sfl_brain.placement): never = leave it to the OS scheduler, auto = only if a core is "
+        "left over for the rest of the run, always = whenever there are as many cores",
     )
 
 

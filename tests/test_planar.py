@@ -142,9 +142,7 @@ def test_slope_changes_the_outcome():
 
 def test_learning_run_end_to_end_with_processes(tmp_path):
     out = tmp_path / "run"
-    done = sfl_run(
-        SCENARIOS / "quickstart.yaml", out, "protocol.trials=12", "record.body_every=4", "pin_cpus=always"
-    )
+    done = sfl_run(SCENARIOS / "quickstart.yaml", out, "protocol.trials=12", "record.body_every=4", "pin_cpus=always")
     assert done.returncode == 0, done.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["trials"] == 12 and summary["status"] == "completed"

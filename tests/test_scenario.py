@@ -112,6 +112,7 @@ def test_lockstep_processes_get_a_core_each_only_when_there_are_enough():
 
     quick = SCENARIOS / "quickstart.yaml"
     assert load(quick).lockstep_processes == ["body", "controller"]  # ACC, vigilance, OFC are not pinned
+    assert load(quick).scenario.pin_cpus == "never"  # pinning is the user's call
     two = load(quick, ["modules.body.workers=2"]).lockstep_processes
     assert two == ["body.0", "controller.0", "body.1", "controller.1"]
     assert load(quick, ["modules.body.workers=2", "modules.controller.colocate=true"]).lockstep_processes == [
@@ -120,8 +121,8 @@ def test_lockstep_processes_get_a_core_each_only_when_there_are_enough():
     ]
     assert load(SCENARIOS / "analytic_learn.yaml").lockstep_processes == ["body"]
     pair = ["body", "controller"]
-    assert assign(pair, [2, 5, 7]) == {"body": [2], "controller": [5]}  # a core left for the rest
-    assert assign(pair, [2, 5]) == {}  # auto: no core left for the brain modules, the viewer...
+    assert assign(pair, [2, 5, 7], "auto") == {"body": [2], "controller": [5]}  # a core left for the rest
+    assert assign(pair, [2, 5], "auto") == {}  # no core left for the brain modules, the viewer...
     assert assign(pair, [2, 5], "always") == {"body": [2], "controller": [5]}
     assert assign(pair, [2, 5, 7], "never") == {}
     assert assign(two, [0, 1], "always") == {}  # four lockstep processes on two cores
