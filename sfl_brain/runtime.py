@@ -118,7 +118,7 @@ class Supervisor:
         self.session: zenoh.Session | None = None
         self._liveliness = None
         self.external_workers: list[str] = []
-        # one core for each body worker and controller process, if there are enough of them
+        # a core of its own for each body worker and controller process, as pin_cpus says
         self.placement = assign(plan.lockstep_processes, usable_cpus(), plan.scenario.pin_cpus)
 
     # ------------------------------------------------------------------ lifecycle
