@@ -45,13 +45,16 @@ from sfl_brain.host import BusLink  # noqa: E402
 from sfl_brain.messages import ControllerReset, SensorFrame, decode, encode  # noqa: E402
 from sfl_brain.placement import assign, pin, usable_cpus  # noqa: E402
 
-PONG = textwrap.dedent("""
-    import json, sys, zenoh
+# every pong: placed (argv[2], JSON cores or null), then a session that connects to the ping (argv[1])
+PREAMBLE = textwrap.dedent("""
+    import json, sys, threading, zenoh
     sys.path.insert(0, {root!r})
     from sfl_brain import bus
     from sfl_brain.placement import pin
     pin(json.loads(sys.argv[2]))
     s = bus.open_session(["tcp/127.0.0.1:0"], [sys.argv[1]])
+""")
+PONG = textwrap.dedent("""
     sub = s.declare_subscriber("bench/ping", zenoh.handlers.RingChannel(64))
     pub = s.declare_publisher("bench/pong")
     tok = s.liveliness().declare_token("bench/pong")
@@ -63,12 +66,6 @@ PONG = textwrap.dedent("""
 """)
 # zenoh-python's examples/z_pong.py, on its own keys
 PONG_EXAMPLE = textwrap.dedent("""
-    import json, sys, threading, zenoh
-    sys.path.insert(0, {root!r})
-    from sfl_brain import bus
-    from sfl_brain.placement import pin
-    pin(json.loads(sys.argv[2]))
-    s = bus.open_session(["tcp/127.0.0.1:0"], [sys.argv[1]])
     done = threading.Event()
     pub = s.declare_publisher("bench/ex/pong", congestion_control=zenoh.CongestionControl.BLOCK)
     def pong(smp):
@@ -81,17 +78,11 @@ PONG_EXAMPLE = textwrap.dedent("""
 """)
 # (typed): the raw pong with the framework's codec and the open-loop controller, by hand
 PONG_TYPED = textwrap.dedent("""
-    import json, sys, zenoh
-    sys.path.insert(0, {root!r})
-    from sfl_brain import bus
-    from sfl_brain.placement import pin
     from sfl_brain.messages import ControllerReset, decode, encode
     from modules.controllers.open_loop import OpenLoopController
     controller = OpenLoopController()
-    controller.handle(ControllerReset(trial_id=0, seed=0, params={{}}, sensors=["s"] * 8,
+    controller.handle(ControllerReset(trial_id=0, seed=0, params={}, sensors=["s"] * 8,
                                       commands=list(controller.COMMANDS)))
-    pin(json.loads(sys.argv[2]))
-    s = bus.open_session(["tcp/127.0.0.1:0"], [sys.argv[1]])
     sub = s.declare_subscriber("bench/typed/ping", zenoh.handlers.RingChannel(64))
     pub = s.declare_publisher("bench/typed/pong")
     tok = s.liveliness().declare_token("bench/typed/pong")
@@ -117,7 +108,8 @@ class Raw:
             "example": ("bench/ex", PONG_EXAMPLE),
             "typed": ("bench/typed", PONG_TYPED),
         }[kind]
-        self.proc = subprocess.Popen([sys.executable, "-c", script.format(root=root), endpoint, json.dumps(cpus)])
+        source = PREAMBLE.format(root=root) + script
+        self.proc = subprocess.Popen([sys.executable, "-c", source, endpoint, json.dumps(cpus)])
         wait_alive(session, f"{prefix}/pong")
         if kind == "example":
             self.pub = session.declare_publisher(f"{prefix}/ping", congestion_control=zenoh.CongestionControl.BLOCK)
