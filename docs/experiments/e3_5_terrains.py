@@ -85,7 +85,7 @@ def on_slope(alpha: float, theta: float, slope: float) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--terrains", type=int, default=12)
-    parser.add_argument("--maps", default="runs/chapter3/e3_4_s0/acc.npz")
+    parser.add_argument("--maps", default="runs/chapter3/e3_4_s0/acc.npz", help="the E3.4 map to switch with")
     parser.add_argument("--out", type=Path, default=ROOT / "runs" / "e3_5_terrains")
     parser.add_argument("--table", type=Path, default=ROOT / "docs" / "results" / "e3_5_terrains.md")
     args = parser.parse_args()
@@ -96,7 +96,7 @@ def main() -> None:
         condition = "conditions=" + json.dumps({"body.terrain": profile})
         exploit = run(
             "e3_5_terrain.yaml",
-            args.out / f"t{k:02d}_switching",
+            args.out / f"t{k:02d}_switching_{maps.parent.name}",  # one per map; the sweeps are shared
             condition,
             f"protocol.maps={maps}",
             "protocol.trials=1",
@@ -123,9 +123,9 @@ def main() -> None:
     lines = [
         "# E3.5 over random terrains: switching against every fixed (alpha, theta)",
         "",
-        f"`python docs/experiments/e3_5_terrains.py --terrains {args.terrains}` (rules in its docstring: pieces "
-        "of 1-2.5 m, slopes -10..+5 deg, 7.5 m in 15 s to succeed; switching table from the E3.4 s_vig 0 map; "
-        f"fixed: the 21 x 21 grid of `e3_5_fixed.yaml`, {len(settings)} settings).",
+        f"`python docs/experiments/e3_5_terrains.py --terrains {args.terrains} --maps {args.maps}` (rules in its "
+        "docstring: pieces of 1-2.5 m, slopes -10..+5 deg, 7.5 m in 15 s to succeed; switching table from that "
+        f"E3.4 map; fixed: the 21 x 21 grid of `e3_5_fixed.yaml`, {len(settings)} settings).",
         "",
         "| terrain | profile (m:deg) | switching | fixed settings that cross |",
         "|---|---|---|---|",
