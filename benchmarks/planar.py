@@ -1,10 +1,13 @@
 """Wall time of one 10-s trial of the planar walker, three ways, plus the parallel grid.
 
-    python benchmarks/planar.py [--repeats 9] [--grid 15] [--pin never|auto|always]
+    python benchmarks/planar.py [--repeats 9] [--grid 15] [--spin-us 200] [--pin never|auto|always]
 
 (a) physics only, fixed open-loop command; (b) reflexive controller and body in one process;
-(c) controller and body as two processes over Zenoh (lockstep, 1000 ticks), placed as ``sfl run``
-    places them under ``pin_cpus`` ``--pin`` (default ``never``, as a scenario; the sweeps too);
+(c) controller and body each hosted in its own process by ``sfl_brain.host``, as ``sfl run`` hosts
+    them, lockstep over Zenoh (1000 ticks); the trial is a request from this process, timed from
+    request to reply. The body waits for each command as ``lockstep.spin_us`` ``--spin-us`` says
+    and the two are placed as ``lockstep.pin_cpus`` ``--pin`` says (defaults as in a scenario; the
+    sweeps too); (c0) is the same pair with the body sleeping at once (spin 0), for comparison;
 then a sweep of a grid x grid subset of the E3.1 grid with 1 and with 2 body workers, with the
 controllers colocated in the body workers and as separate processes.
 """
@@ -26,9 +29,9 @@ from bodies.planar_biped import PlanarBiped  # noqa: E402
 from modules.controllers.reflex import ReflexController  # noqa: E402
 from sfl_brain import bus  # noqa: E402
 from sfl_brain.body import InProcessLink  # noqa: E402
-from sfl_brain.host import BusLink  # noqa: E402
-from sfl_brain.messages import TrialRequest  # noqa: E402
-from sfl_brain.placement import assign, pin, usable_cpus  # noqa: E402
+from sfl_brain.host import request  # noqa: E402
+from sfl_brain.messages import SensorFrame, TrialRequest  # noqa: E402
+from sfl_brain.placement import assign, usable_cpus  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 REQUEST = TrialRequest(
@@ -61,30 +64,33 @@ def one_process() -> float:
 
 
 class Processes:
-    """(c): the body here, the reflex controller hosted in its own process, lockstep over Zenoh."""
+    """(c): the walker and the reflex controller, each hosted in its own process as sfl run hosts
+    them; a trial is a request from here, as the supervisor sends it."""
 
-    def __init__(self, session, endpoint, cpus) -> None:
-        run_id = "benchplanar"
-        reference = "modules.controllers.reflex:ReflexController"
-        self.proc = spawn_host(controller_spec(run_id, reference, endpoint, cpus))
-        wait_alive(session, bus.alive_key(run_id, "controller"))
-        self.body = PlanarBiped()
-        self.body.link = BusLink(session, run_id, "body", "controller", 10.0)
+    def __init__(self, session, endpoint, run_id, placed, spin) -> None:
+        controller = controller_spec(run_id, "modules.controllers.reflex:ReflexController", endpoint)
+        body = controller_spec(run_id, "bodies.planar_biped:PlanarBiped", endpoint, placed.get("body"))
+        body.update(instance="body", spec_name="body", routes={SensorFrame.TAG: "controller"}, spin=spin)
+        controller["cpus"] = placed.get("controller")
+        self.procs = [spawn_host(controller), spawn_host(body)]
+        for name in ("controller", "body"):
+            wait_alive(session, bus.alive_key(run_id, name))
+        self.session, self.key = session, bus.key(run_id, "body", TrialRequest.TAG)
 
     def trial(self) -> float:
         t = time.perf_counter()
-        result = self.body.handle(REQUEST)
+        result = request(self.session, self.key, REQUEST, 60.0)
         elapsed = time.perf_counter() - t
         assert result.metrics["time"] >= 9.99, result
         return elapsed
 
     def close(self) -> None:
-        self.body.link.close()
-        self.proc.terminate()
-        self.proc.wait(timeout=10)
+        for proc in self.procs:
+            proc.terminate()
+            proc.wait(timeout=10)
 
 
-def sweep(workers: int, grid: int, colocate: bool, pin_cpus: str) -> float:
+def sweep(workers: int, grid: int, colocate: bool, lockstep: list[str]) -> float:
     from sfl_brain.run import run
     from sfl_brain.scenario import load
 
@@ -96,7 +102,7 @@ def sweep(workers: int, grid: int, colocate: bool, pin_cpus: str) -> float:
             f"space.1.steps={grid}",
             "record.body_every=0",
             f"modules.controller.colocate={str(colocate).lower()}",
-            f"pin_cpus={pin_cpus}",
+            *lockstep,
         ],
     )
     with tempfile.TemporaryDirectory() as tmp:
@@ -110,28 +116,31 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--repeats", type=int, default=9)
     parser.add_argument("--grid", type=int, default=15)
-    parser.add_argument("--pin", choices=["never", "auto", "always"], default="never", help="pin_cpus")
+    parser.add_argument("--spin-us", type=float, default=200.0, help="lockstep.spin_us")
+    parser.add_argument("--pin", choices=["never", "auto", "always"], default="never", help="lockstep.pin_cpus")
     args = parser.parse_args()
     endpoint = bus.free_endpoint()
     session = bus.open_session([endpoint], [])
-    cpus = usable_cpus()
-    # as sfl run places one body worker (this process) and its controller process
-    placed = assign(["body", "controller"], cpus, args.pin)
-    pin(placed.get("body"))
-    a, b, c = [], [], []
+    # as sfl run places one body worker and its controller process
+    placed = assign(["body", "controller"], usable_cpus(), args.pin)
+    a, b, c, c0 = [], [], [], []
+    pairs = []
     try:
-        over_zenoh = Processes(session, endpoint, placed.get("controller"))
-        over_zenoh.trial()  # warm up
-        for _ in range(args.repeats):  # interleaved, so that all three see the same machine load
+        pairs.append(Processes(session, endpoint, "benchplanar", placed, args.spin_us * 1e-6))
+        pairs.append(Processes(session, endpoint, "benchplanar0", placed, 0.0))
+        for pair in pairs:
+            pair.trial()  # warm up
+        for _ in range(args.repeats):  # interleaved, so that all see the same machine load
             a.append(physics_only())
             b.append(one_process())
-            c.append(over_zenoh.trial())
-        over_zenoh.close()
+            c.append(pairs[0].trial())
+            c0.append(pairs[1].trial())
     finally:
-        pin(cpus)  # sfl run places the sweeps' processes itself
+        for pair in pairs:
+            pair.close()
         session.close()
-    a, b, c = np.median(a), np.median(b), np.median(c)
-    where = f"pin {args.pin}: " + (
+    a, b, c, c0 = np.median(a), np.median(b), np.median(c), np.median(c0)
+    where = f"spin {args.spin_us:g} us, pin {args.pin}: " + (
         f"body on cores {placed['body']}, controller on {placed['controller']}" if placed else "not pinned"
     )
     print(f"one 10-s trial (1000 control ticks, 10 000 physics steps), median of {args.repeats}, interleaved, {where}:")
@@ -139,6 +148,7 @@ def main() -> None:
     print(f"  (b) controller + body, one process  {b * 1e3:7.1f} ms  ({10 / b:5.1f}x real time)")
     print(f"  (c) controller + body over Zenoh    {c * 1e3:7.1f} ms  ({10 / c:5.1f}x real time; goal >= 20x)")
     print(f"  (c)/(b) = {c / b:.2f} (goal <= 1.5)   (b)/(a) = {b / a:.2f}")
+    print(f"  (c0) the same, the body sleeping at once  {c0 * 1e3:7.1f} ms, (c0)/(b) = {c0 / b:.2f}")
     print(f"  500 walking trials at (c): <= {500 * c:.0f} s (goal: E3.2 under 240 s; falls end trials early)")
     n = args.grid**2
     print(f"sweep of {n} grid points (E3.1 subset), whole sfl run including start-up:")
@@ -146,8 +156,9 @@ def main() -> None:
         (True, "controller inside each body worker (colocate: true)"),
         (False, "controller as its own process per worker"),
     ):
-        one = sweep(1, args.grid, colocate, args.pin)
-        two = sweep(2, args.grid, colocate, args.pin)
+        lockstep = [f"lockstep.spin_us={args.spin_us}", f"lockstep.pin_cpus={args.pin}"]
+        one = sweep(1, args.grid, colocate, lockstep)
+        two = sweep(2, args.grid, colocate, lockstep)
         print(f"  {label}: 1 worker {one:.1f} s, 2 workers {two:.1f} s, speed-up {one / two:.2f}x (goal >= 1.7x)")
 
 

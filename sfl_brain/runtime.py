@@ -118,8 +118,8 @@ class Supervisor:
         self.session: zenoh.Session | None = None
         self._liveliness = None
         self.external_workers: list[str] = []
-        # a core of its own for each body worker and controller process, as pin_cpus says
-        self.placement = assign(plan.lockstep_processes, usable_cpus(), plan.scenario.pin_cpus)
+        # a core of its own for each body worker and controller process, as lockstep.pin_cpus says
+        self.placement = assign(plan.lockstep_processes, usable_cpus(), plan.scenario.lockstep.pin_cpus)
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:
@@ -159,6 +159,7 @@ class Supervisor:
             "viewer": self.viewer,
             "realtime": self.realtime,
             "tick_timeout": self.plan.scenario.timeouts.tick,
+            "spin": self.plan.scenario.lockstep.spin_us * 1e-6,
             "colocated": hosted_spec(colocated),
             "cpus": self.placement.get(inst.name),
         }

@@ -101,6 +101,25 @@ class Timeouts(Strict):
     )
 
 
+class Lockstep(Strict):
+    """How a body worker and its controller process exchange their ticks (see sfl_brain.placement
+    and sfl_brain.host.SpinThenSleep)."""
+
+    spin_us: float = Field(
+        200.0,
+        ge=0,
+        le=100_000,
+        description="us the body polls for each command before it sleeps; it measures its ticks and "
+        "polls only while that is faster (0: always sleep)",
+    )
+    pin_cpus: Literal["never", "auto", "always"] = Field(
+        "never",
+        description="a core of its own for each body worker and controller process: never = leave it "
+        "to the OS scheduler, auto = only if a core is left over for the rest of the run, "
+        "always = whenever there are as many cores",
+    )
+
+
 class ScenarioModel(Strict):
     name: str = Field(pattern=r"^[A-Za-z0-9_.-]+$")
     description: str = ""
@@ -111,12 +130,7 @@ class ScenarioModel(Strict):
     modules: dict[str, ModuleSpec] = Field(min_length=1)
     record: Record = Record()
     timeouts: Timeouts = Timeouts()
-    pin_cpus: Literal["never", "auto", "always"] = Field(
-        "never",
-        description="a core of its own for each body worker and controller process "
-        "(sfl_brain.placement): never = leave it to the OS scheduler, auto = only if a core is "
-        "left over for the rest of the run, always = whenever there are as many cores",
-    )
+    lockstep: Lockstep = Lockstep()
 
 
 # --------------------------------------------------------------------------------------------

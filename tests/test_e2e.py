@@ -303,3 +303,23 @@ def test_sfl_study_runs_every_combination_and_plots_success_against_vigilance(tm
         str(tmp_path / "bad"),
     )
     assert bad.returncode == 2 and "did you mean `value`" in bad.stderr and not (tmp_path / "bad").exists()
+
+
+def test_the_body_polls_for_commands_only_while_polling_makes_ticks_shorter():
+    from sfl_brain.host import SpinThenSleep
+
+    def run(spin_tick, sleep_tick, ticks=1024):
+        now = [0.0]
+        waiter = SpinThenSleep(200e-6, clock=lambda: now[0])
+        ways = []
+        for _ in range(ticks):
+            ways.append(waiter.next_tick())
+            now[0] += spin_tick if ways[-1] else sleep_tick  # the tick's time, by the way it waited
+        return ways
+
+    fast_spin = run(100e-6, 150e-6)
+    assert sum(fast_spin[128:]) == (1024 - 128) * 120 // 128  # polls, but waits the other way 8 ticks a cycle
+    slow_spin = run(150e-6, 100e-6)  # a busy machine: polling takes the partner's core
+    assert sum(slow_spin[256:]) == (1024 - 256) * 8 // 128  # sleeps after the first cycle; tries polling 8 a cycle
+    never = SpinThenSleep(0.0)  # lockstep.spin_us: 0
+    assert not any(never.next_tick() for _ in range(300))

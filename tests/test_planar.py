@@ -142,7 +142,9 @@ def test_slope_changes_the_outcome():
 
 def test_learning_run_end_to_end_with_processes(tmp_path):
     out = tmp_path / "run"
-    done = sfl_run(SCENARIOS / "quickstart.yaml", out, "protocol.trials=12", "record.body_every=4", "pin_cpus=always")
+    done = sfl_run(
+        SCENARIOS / "quickstart.yaml", out, "protocol.trials=12", "record.body_every=4", "lockstep.pin_cpus=always"
+    )
     assert done.returncode == 0, done.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["trials"] == 12 and summary["status"] == "completed"
@@ -157,7 +159,7 @@ def test_learning_run_end_to_end_with_processes(tmp_path):
     assert counts["/trials/success"] == 12 and counts["/acc/success_map/neurons"] >= 12
     assert (out / "acc.npz").exists()
     assert np.load(out / "acc.npz")["success_weights"].shape == (100, 2)
-    # the body and its controller each ran on a core of its own (pin_cpus: always), as the OS says
+    # the body and its controller each ran on a core of its own (lockstep.pin_cpus: always), as the OS says
     logs = {name: (out / "logs" / f"{name}.log").read_text() for name in ("body", "controller", "acc")}
     cpus = usable_cpus()
     if len(cpus) >= 2:

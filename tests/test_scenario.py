@@ -112,7 +112,7 @@ def test_lockstep_processes_get_a_core_each_only_when_there_are_enough():
 
     quick = SCENARIOS / "quickstart.yaml"
     assert load(quick).lockstep_processes == ["body", "controller"]  # ACC, vigilance, OFC are not pinned
-    assert load(quick).scenario.pin_cpus == "never"  # pinning is the user's call
+    assert load(quick).scenario.lockstep.pin_cpus == "never"  # pinning is the user's call
     two = load(quick, ["modules.body.workers=2"]).lockstep_processes
     assert two == ["body.0", "controller.0", "body.1", "controller.1"]
     assert load(quick, ["modules.body.workers=2", "modules.controller.colocate=true"]).lockstep_processes == [
