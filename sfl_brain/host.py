@@ -47,14 +47,13 @@ class SpinThenSleep:
     """How a body waits for each command: poll for up to ``budget`` seconds, then sleep in recv().
 
     Polling keeps the body on its core with warm caches, and the controller wakes on the other
-    one: on 2 idle cores a walker trial over Zenoh took 1.28-1.30x the one-process time instead of
-    1.43-1.54x. But a polling body takes a core that the controller or anything else running
-    may need, and then every tick waits for a time slice: beside one busy loop the same trial
-    took 260 ms instead of 203 ms. So it measures, as Aeron's idle strategies are tuned but
-    online: every ``CYCLE`` ticks, ``EXPLORE`` of them wait the other way, and the way whose
-    median tick (put to put, physics included) was shorter is kept for the next cycle (medians:
-    one tick in a hundred takes a scheduling hiccup, which would sway a mean of eight).
-    ``budget`` 0 always sleeps at once.
+    one: on 2 idle cores, walker trials of a full E3.2 run were 1-5% shorter. But a polling body
+    takes a core that the controller or anything else running may need, and then every tick
+    waits for a time slice: beside one busy loop, plain polling made a trial 28% longer. So it
+    measures, as Aeron's idle strategies are tuned but online: every ``CYCLE`` ticks, ``EXPLORE``
+    of them wait the other way, and the way whose median tick (put to put, physics included) was
+    shorter is kept for the next cycle (medians: one tick in a hundred takes a scheduling
+    hiccup, which would sway a mean of eight). ``budget`` 0 always sleeps at once.
     """
 
     CYCLE, EXPLORE = 128, 8

@@ -15,9 +15,9 @@ than cores (two body workers and two controller processes on two cores) a sweep 
 faster with two workers, against 1.35-1.54x unpinned.
 
 Nor can one run know which cores another run has pinned: two runs started side by side with
-the same ``pin_cpus`` would pin to the same cores and compete on them while other cores idle.
+the same ``lockstep.pin_cpus`` would pin to the same cores and compete on them while other cores idle.
 
-So the scenario's ``pin_cpus`` is ``never`` by default, as in ROS 2 or dora, where pinning is the
+So the scenario's ``lockstep.pin_cpus`` is ``never`` by default, as in ROS 2 or dora, where pinning is the
 user's call. ``auto`` gives the body workers and their controller processes one core each, in that
 order, when a core is left over for everything else (the brain modules, the supervisor's logging,
 a viewer); ``always`` whenever there are as many cores as lockstep processes (a machine kept for the
@@ -41,7 +41,7 @@ def usable_cpus() -> list[int]:
 
 
 def assign(lockstep: list[str], cpus: list[int], mode: str) -> dict[str, list[int]]:
-    """One core per lockstep process (``lockstep``: names in order) under ``pin_cpus`` ``mode``,
+    """One core per lockstep process (``lockstep``: names in order) under ``lockstep.pin_cpus`` ``mode``,
     or none at all: with ``never``, with a single core, or with too few cores for the mode."""
     spare = {"auto": 1, "always": 0}.get(mode)
     if spare is None or len(cpus) < 2 or len(lockstep) + spare > len(cpus):
