@@ -93,8 +93,9 @@ class SpinThenSleep:
 class BusLink:
     """A body's link to a controller in another process: lockstep pub/sub per tick.
 
-    The body's thread publishes a frame and blocks in the subscriber's ring channel for the
-    command (no Python thread handoff on the tick path). A watchdog thread wakes the body with
+    The body's thread publishes a frame and waits in the subscriber's ring channel for the
+    command (no Python thread handoff on the tick path): it polls for up to ``spin`` seconds
+    while that pays (:class:`SpinThenSleep`), then blocks. A watchdog thread wakes the body with
     an empty payload if a command is overdue, so a dead or hung controller interrupts the trial
     after ``timeout`` seconds instead of blocking forever.
     """
