@@ -31,7 +31,7 @@ from . import bus
 from .body import Body, InProcessLink
 from .messages import ControllerReset, Message, MessageError, MotorCommand, SensorFrame, decode, encode
 from .module import Module
-from .placement import pin
+from .placement import pin, usable_cpus
 from .registry import resolve
 
 log = logging.getLogger("sfl.host")
@@ -105,7 +105,10 @@ class BusLink:
     ) -> None:
         self.session = session
         self.timeout = timeout
-        self.waiter = SpinThenSleep(spin)
+        # polling needs a core for the controller to answer on while the body polls: a body on
+        # one core (a 1-core machine, or pinned by lockstep.pin_cpus, where polling measured
+        # slower) sleeps at once
+        self.waiter = SpinThenSleep(spin if len(usable_cpus()) > 1 else 0.0)
         self.reset_key = bus.key(run_id, controller, ControllerReset.TAG)
         self.command_key = bus.key(run_id, body, MotorCommand.TAG)
         self.publisher = session.declare_publisher(bus.key(run_id, controller, SensorFrame.TAG))
