@@ -91,8 +91,6 @@ class Packed(typing.NamedTuple):
     and a decoder compiled for its fields (the control tick runs each of them twice)."""
 
     prefix: bytes  # 0xC1, schema version, tag length, tag
-    scalars: struct.Struct  # the int/float fields, little-endian int64/float64
-    vector: str  # the name of the float64 vector field
     encode: Any  # message -> bytes, or None when a field does not fit the layout (msgpack then)
     decode: Any  # payload -> message, or None when the payload does not fit the layout
 
@@ -161,7 +159,7 @@ def _packed_layout(cls, names: tuple[str, ...], hints: dict) -> Packed:
     head.append(f"    s = unpack(data, {len(prefix)})")
     values = {n: f"ndarray(n >> 3, F8, data, {start})" if n == vector else f"s[{i}]" for i, n in enumerate(names)}
     decoder = _slot_filler(cls, "data", values, namespace, head=head)
-    return Packed(prefix, layout, vector, encoder, decoder)
+    return Packed(prefix, encoder, decoder)
 
 
 def message(tag: str, *, stream: bool = False, packed: bool = False):
