@@ -208,7 +208,6 @@ def worker(scenario, connect, run_id, name, overrides) -> None:
         "rrd": None,
         "viewer": None,
         "tick_timeout": plan.scenario.timeouts.tick,
-        "spin": plan.scenario.lockstep.spin_us * 1e-6,
         "watch_stdin": False,
         "colocated": hosted_spec(ctrl),
     }

@@ -58,9 +58,8 @@ class SpinThenSleep:
 
     CYCLE, EXPLORE = 128, 8
 
-    def __init__(self, budget: float, clock=time.perf_counter) -> None:
+    def __init__(self, budget: float) -> None:
         self.budget = budget
-        self.clock = clock
         self.prefer_spin = budget > 0
         self.restart()
 
@@ -71,11 +70,11 @@ class SpinThenSleep:
         self.last: float | None = None
         self.periods: tuple[list[float], list[float]] = ([], [])  # this cycle's tick times, by way (index: spun)
 
-    def next_tick(self) -> bool:
-        """Account the tick that ended now to the way it waited; say whether this one polls."""
+    def next_tick(self, now: float) -> bool:
+        """Account the tick that ended at ``now`` (``time.perf_counter``) to the way it waited;
+        say whether this one polls."""
         if not self.budget:
             return False
-        now = self.clock()
         if self.last is not None:
             self.periods[self.spin].append(now - self.last)
         self.last = now
@@ -133,7 +132,7 @@ class BusLink:
         period = min(max(self.timeout / 4, 0.01), 1.0)
         while not self._closed.wait(period):
             since = self._waiting_since
-            if since is not None and time.monotonic() - since > self.timeout and self._abort is None:
+            if since is not None and time.perf_counter() - since > self.timeout and self._abort is None:
                 self._wake(f"no command for tick {{tick}} within {self.timeout:g} s")
 
     def interrupt(self) -> None:
@@ -155,8 +154,8 @@ class BusLink:
     def step(self, frame: SensorFrame) -> MotorCommand:
         if not self._stopping:
             self._abort = None
-        self._waiting_since = time.monotonic()
-        spin = self.waiter.next_tick()
+        now = self._waiting_since = time.perf_counter()
+        spin = self.waiter.next_tick(now)
         self.publisher.put(encode(frame))
         try:
             while True:

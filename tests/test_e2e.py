@@ -309,12 +309,12 @@ def test_the_body_polls_for_commands_only_while_polling_makes_ticks_shorter():
     from sfl_brain.host import SpinThenSleep
 
     def run(spin_tick, sleep_tick, ticks=1024):
-        now = [0.0]
-        waiter = SpinThenSleep(200e-6, clock=lambda: now[0])
+        now = 0.0
+        waiter = SpinThenSleep(200e-6)
         ways = []
         for _ in range(ticks):
-            ways.append(waiter.next_tick())
-            now[0] += spin_tick if ways[-1] else sleep_tick  # the tick's time, by the way it waited
+            ways.append(waiter.next_tick(now))
+            now += spin_tick if ways[-1] else sleep_tick  # the tick's time, by the way it waited
         return ways
 
     fast_spin = run(100e-6, 150e-6)
@@ -322,4 +322,4 @@ def test_the_body_polls_for_commands_only_while_polling_makes_ticks_shorter():
     slow_spin = run(150e-6, 100e-6)  # a busy machine: polling takes the partner's core
     assert sum(slow_spin[256:]) == (1024 - 256) * 8 // 128  # sleeps after the first cycle; tries polling 8 a cycle
     never = SpinThenSleep(0.0)  # lockstep.spin_us: 0
-    assert not any(never.next_tick() for _ in range(300))
+    assert not any(never.next_tick(t * 1e-4) for t in range(300))
