@@ -20,6 +20,8 @@ from pydantic import Field
 from .messages import Ack, ControllerReset, MotorCommand, SensorFrame, TrialRequest, TrialResult
 from .module import Module, ModuleParams, on
 
+_F8 = np.dtype(np.float64)
+
 
 class ControllerLink(Protocol):
     """How a body reaches its controller during a trial."""
@@ -185,8 +187,10 @@ class Controller(Module):
         values = self.step(frame.values[self._sensor_index])
         if self._neuron_log is not None:
             self._neuron_log[0].append(self.neurons())
-        # a step that returns a list or float32 still sends a float64 vector (the packed layout)
-        return MotorCommand(trial_id=frame.trial_id, tick=frame.tick, values=np.asarray(values, dtype=np.float64))
+        if type(values) is not np.ndarray or values.dtype != _F8:
+            # a step that returns a list or float32 still sends a float64 vector (the packed layout)
+            values = np.asarray(values, dtype=_F8)
+        return MotorCommand(trial_id=frame.trial_id, tick=frame.tick, values=values)
 
     def flush_neurons(self) -> None:
         """Send a logged trial's neuron activities as scalar columns on ``sim_time`` and ``trial``."""

@@ -154,9 +154,10 @@ class BusLink:
     def step(self, frame: SensorFrame) -> MotorCommand:
         if not self._stopping:
             self._abort = None
+        self.publisher.put(encode(frame))
+        # the bookkeeping runs while the controller works on the frame, not before it is sent
         now = self._waiting_since = time.perf_counter()
         spin = self.waiter.next_tick(now)
-        self.publisher.put(encode(frame))
         try:
             while True:
                 sample = None
@@ -175,11 +176,7 @@ class BusLink:
                 except MessageError as exc:
                     log.warning("dropped malformed command: %s", exc)
                     continue
-                if (
-                    not isinstance(command, MotorCommand)
-                    or command.trial_id != frame.trial_id
-                    or command.tick != frame.tick
-                ):
+                if type(command) is not MotorCommand or command.trial_id != frame.trial_id or command.tick != frame.tick:
                     log.warning("dropped unexpected message %s", getattr(command, "TAG", command))
                     continue
                 return command
@@ -368,30 +365,38 @@ class Host:
             query.drop()
 
     def _stream_loop(self, subscriber) -> None:
-        recv, handle = subscriber.recv, self._stream
+        """Answer lockstep stream messages: decode, handle, publish the reply (one per tick)."""
+        module, lock, publishers = self.module, self._lock, self._publishers
+        # the handler of each message type, bound once (unless the module dispatches by itself)
+        handlers = (
+            {t: getattr(module, name) for t, name in type(module).handles.items()}
+            if type(module).handle is Module.handle
+            else {}
+        )
+        recv = subscriber.recv
         while True:
             data = recv().payload.to_bytes()
             if self._stopping:
                 return
-            handle(data)
-
-    def _stream(self, data: bytes) -> None:
-        try:
-            msg = decode(data)
-            with self._lock:
-                reply = self.module.handle(msg)
-        except MessageError as exc:
-            log.warning("%s: dropped malformed stream message: %s", self.instance, exc)
-            return
-        except Exception:
-            log.exception("%s: error handling a stream message", self.instance)
-            return
-        if reply is not None:
-            publisher = self._publishers.get(reply.TAG)
-            if publisher is None:
-                key_expr = self._reply_key(reply.TAG)
-                publisher = self._publishers[reply.TAG] = self.session.declare_publisher(key_expr)
-            publisher.put(encode(reply))
+            try:
+                msg = decode(data)
+                handler = handlers.get(type(msg), module.handle)
+                with lock:
+                    if module._deferred:  # as Module.handle: deferred work runs before the next message
+                        module.run_deferred()
+                    reply = handler(msg)
+            except MessageError as exc:
+                log.warning("%s: dropped malformed stream message: %s", self.instance, exc)
+                continue
+            except Exception:
+                log.exception("%s: error handling a stream message", self.instance)
+                continue
+            if reply is not None:
+                publisher = publishers.get(reply.TAG)
+                if publisher is None:
+                    key_expr = self._reply_key(reply.TAG)
+                    publisher = publishers[reply.TAG] = self.session.declare_publisher(key_expr)
+                publisher.put(encode(reply))
 
 
 def _watch_parent(host: Host) -> None:

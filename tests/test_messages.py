@@ -1,10 +1,10 @@
-import dataclasses
-
-import msgpack
+import msgspec
 import numpy as np
 import pytest
 
 from sfl_brain import messages as m
+
+packb = msgspec.msgpack.encode
 
 
 def test_roundtrip_keeps_arrays_and_types():
@@ -30,11 +30,11 @@ def test_roundtrip_keeps_arrays_and_types():
         ),
         (b"\x93\x09\xa3ack\x91\xa0", "schema version 9"),
         (
-            msgpack.packb([m.SCHEMA_VERSION, "controller.sensors", [0, 1, msgpack.ExtType(1, b"\x02|O\x00")]]),
+            packb([m.SCHEMA_VERSION, "controller.sensors", [0, 1, msgspec.msgpack.Ext(1, b"\x02|O\x00")]]),
             "object arrays",
         ),
         (
-            msgpack.packb([m.SCHEMA_VERSION, "controller.sensors", [0, 1, msgpack.ExtType(1, b"\x03<f8\x01\x09")]]),
+            packb([m.SCHEMA_VERSION, "controller.sensors", [0, 1, msgspec.msgpack.Ext(1, b"\x03<f8\x01\x09")]]),
             "not msgpack",
         ),
         (m.encode(m.Ack(detail="x")).replace(b"ack", b"zzz"), "unknown message tag 'zzz'"),
@@ -51,8 +51,8 @@ def test_packed_stream_messages_roundtrip_and_fall_back_for_other_arrays():
     assert data[0] == 0xC1 and len(data) == 3 + len("controller.sensors") + 16 + 24
     back = m.decode(data)
     assert type(back) is m.SensorFrame and (back.trial_id, back.tick) == (3, -7) and back.values.dtype == np.float64
-    with pytest.raises(dataclasses.FrozenInstanceError):
-        back.tick = 0  # built without __init__, still frozen
+    with pytest.raises(AttributeError, match="immutable"):
+        back.tick = 0
     np.testing.assert_array_equal(back.values, frame.values)
     # not a float64 vector: the general layout carries it unchanged
     for values in (np.arange(4, dtype=np.int32), np.zeros((2, 2))):
@@ -63,21 +63,44 @@ def test_packed_stream_messages_roundtrip_and_fall_back_for_other_arrays():
 
 
 def test_wrong_field_type_is_rejected():
-    bad = msgpack.packb([m.SCHEMA_VERSION, "ofc.grade", ["high"]])
+    bad = packb([m.SCHEMA_VERSION, "ofc.grade", ["high"]])
     with pytest.raises(m.MessageError, match="ofc.grade.eta"):
         m.decode(bad)
 
 
-def test_messages_keep_the_dataclass_constructor_contract():
+def test_messages_are_frozen_keyword_only_structs():
     assert m.Ack() == m.Ack(detail="") and m.Ack(detail="x").detail == "x"  # defaults
     reset = m.ControllerReset(trial_id=1, seed=2, params={}, sensors=[], commands=[])
     assert (reset.log, reset.dt) == (False, 0.01)
-    with pytest.raises(TypeError, match="missing 1 required keyword-only argument: 'values'"):
+    with pytest.raises(TypeError, match="Missing required argument 'values'"):
         m.SensorFrame(trial_id=0, tick=1)
     with pytest.raises(TypeError, match="positional"):
         m.SensorFrame(0, 1, np.zeros(2))
-    with pytest.raises(TypeError, match="unexpected keyword argument 'bogus'"):
+    with pytest.raises(TypeError, match="Unexpected keyword argument 'bogus'"):
         m.Ack(bogus=1)
-    with pytest.raises(dataclasses.FrozenInstanceError):
+    with pytest.raises(AttributeError, match="immutable"):
         reset.seed = 3
-    assert dataclasses.replace(reset, seed=5).seed == 5
+    assert msgspec.structs.replace(reset, seed=5).seed == 5
+
+
+def test_a_users_message_is_a_keyword_only_message_subclass():
+    @m.message("test.user_defined")
+    class Probe(m.Message, kw_only=True):
+        x: float
+        n: int = 3
+
+    try:
+        with pytest.raises(TypeError, match="positional"):
+            Probe(1.0)
+        back = m.decode(m.encode(Probe(x=2.5)))
+        assert type(back) is Probe and (back.x, back.n) == (2.5, 3)
+        with pytest.raises(TypeError, match="subclass of sfl_brain.messages.Message"):
+            m.message("test.not_a_message")(type("Plain", (), {}))
+
+        class Positional(m.Message):
+            x: float
+
+        with pytest.raises(TypeError, match=r"declare `class Positional\(Message, kw_only=True\)`"):
+            m.message("test.positional")(Positional)
+    finally:
+        m._REGISTRY.pop("test.user_defined", None)

@@ -195,7 +195,7 @@ def test_garbage_on_the_tick_keys_is_dropped_and_changes_nothing(tmp_path):
     dropped by the controller's host and by the body's link; the trials come out as without them."""
     import threading
 
-    import msgpack
+    import msgspec
 
     from sfl_brain import bus
     from sfl_brain.messages import SCHEMA_VERSION, SensorFrame, encode
@@ -206,7 +206,7 @@ def test_garbage_on_the_tick_keys_is_dropped_and_changes_nothing(tmp_path):
     sets = ["protocol.trials=10", "record.body_every=0"]
     garbage = [
         b"\x00garbage\xff",  # not msgpack
-        msgpack.packb([SCHEMA_VERSION, "no.such.tag", []]),
+        msgspec.msgpack.encode([SCHEMA_VERSION, "no.such.tag", []]),
         b"\xc1",  # packed, too short
         b"\xc1\x09\x12controller.sensors" + bytes(24),  # packed, another schema version
         b"\xc1\x02\x05bogus" + bytes(24),  # packed, unknown tag
