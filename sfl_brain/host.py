@@ -176,7 +176,11 @@ class BusLink:
                 except MessageError as exc:
                     log.warning("dropped malformed command: %s", exc)
                     continue
-                if type(command) is not MotorCommand or command.trial_id != frame.trial_id or command.tick != frame.tick:
+                if (
+                    type(command) is not MotorCommand
+                    or command.trial_id != frame.trial_id
+                    or command.tick != frame.tick
+                ):
                     log.warning("dropped unexpected message %s", getattr(command, "TAG", command))
                     continue
                 return command
