@@ -29,7 +29,7 @@ import zenoh
 
 from . import bus
 from .body import Body, InProcessLink
-from .messages import ControllerReset, Message, MessageError, MotorCommand, SensorFrame, decode, encode
+from .messages import ControllerReset, Message, MessageError, MotorCommand, SensorFrame, decode, decoder_for, encode
 from .module import Module
 from .placement import pin, usable_cpus
 from .registry import resolve
@@ -37,6 +37,7 @@ from .registry import resolve
 log = logging.getLogger("sfl.host")
 
 STOP = object()
+_decode_command = decoder_for(MotorCommand)
 
 
 class LinkError(RuntimeError):
@@ -152,27 +153,29 @@ class BusLink:
             raise LinkError(f"controller reset for trial {msg.trial_id}: {exc}") from None
 
     def step(self, frame: SensorFrame) -> MotorCommand:
+        clock, decode_command = time.perf_counter, _decode_command
         if not self._stopping:
             self._abort = None
         self.publisher.put(encode(frame))
         # the bookkeeping runs while the controller works on the frame, not before it is sent
-        now = self._waiting_since = time.perf_counter()
+        now = self._waiting_since = clock()
         spin = self.waiter.next_tick(now)
+        subscriber = self.subscriber
         try:
             while True:
                 sample = None
                 if spin:
-                    try_recv, deadline = self.subscriber.try_recv, time.perf_counter() + self.waiter.budget
-                    while (sample := try_recv()) is None and time.perf_counter() < deadline:
+                    try_recv, deadline = subscriber.try_recv, now + self.waiter.budget
+                    while (sample := try_recv()) is None and clock() < deadline:
                         pass
                     spin = False  # after a wake-up or a dropped message: sleep
-                data = (sample if sample is not None else self.subscriber.recv()).payload.to_bytes()
+                data = (sample if sample is not None else subscriber.recv()).payload.to_bytes()
                 if self._abort is not None:
                     raise LinkError("interrupted: " + self._abort.format(tick=frame.tick))
                 if not data:
                     continue  # a late wake-up from an earlier tick
                 try:
-                    command = decode(data)
+                    command = decode_command(data)
                 except MessageError as exc:
                     log.warning("dropped malformed command: %s", exc)
                     continue
@@ -303,7 +306,7 @@ class Host:
                     subscriber = self.session.declare_subscriber(key_expr, zenoh.handlers.RingChannel(64))
                     thread = threading.Thread(
                         target=self._stream_loop,
-                        args=(subscriber,),
+                        args=(subscriber, message_type),
                         daemon=True,
                         name=f"stream-{message_type.TAG}",
                     )
@@ -368,7 +371,7 @@ class Host:
         finally:
             query.drop()
 
-    def _stream_loop(self, subscriber) -> None:
+    def _stream_loop(self, subscriber, message_type: type[Message]) -> None:
         """Answer lockstep stream messages: decode, handle, publish the reply (one per tick)."""
         module, lock, publishers = self.module, self._lock, self._publishers
         # the handler of each message type, bound once (unless the module dispatches by itself)
@@ -377,14 +380,14 @@ class Host:
             if type(module).handle is Module.handle
             else {}
         )
-        recv = subscriber.recv
+        recv, decode_stream = subscriber.recv, decoder_for(message_type)
         while True:
             data = recv().payload.to_bytes()
             if self._stopping:
                 return
             try:
-                msg = decode(data)
-                handler = handlers.get(type(msg), module.handle)
+                msg = decode_stream(data)
+                handler = handlers.get(type(msg)) or module.handle
                 with lock:
                     if module._deferred:  # as Module.handle: deferred work runs before the next message
                         module.run_deferred()

@@ -1,3 +1,5 @@
+import re
+
 import msgspec
 import numpy as np
 import pytest
@@ -104,3 +106,29 @@ def test_a_users_message_is_a_keyword_only_message_subclass():
             m.message("test.positional")(Positional)
     finally:
         m._REGISTRY.pop("test.user_defined", None)
+
+
+def test_decoder_for_a_type_gives_what_decode_gives_for_any_payload():
+    frame = m.SensorFrame(trial_id=3, tick=4, values=np.array([1.5, -2.0]))
+    payloads = [
+        m.encode(frame),  # packed, the expected type
+        m.encode(m.MotorCommand(trial_id=3, tick=4, values=np.zeros(2))),  # packed, another type
+        m.encode(m.SensorFrame(trial_id=3, tick=4, values=np.zeros((2, 2)))),  # msgpack layout
+        m.encode(m.Ack(detail="x")),  # not a stream message at all
+        m.encode(frame)[:-3],  # the expected prefix, cut short
+        b"\xc1",
+        b"garbage",
+    ]
+    fast = m.decoder_for(m.SensorFrame)
+    assert m.decoder_for(m.Ack) is m.decode  # nothing to gain without a packed layout
+    for payload in payloads:
+        try:
+            expected = m.decode(payload)
+        except m.MessageError as exc:
+            with pytest.raises(m.MessageError, match=re.escape(str(exc))):
+                fast(payload)
+            continue
+        got = fast(payload)
+        assert type(got) is type(expected)
+        for name in expected._FIELDS:
+            np.testing.assert_array_equal(getattr(got, name), getattr(expected, name))
