@@ -68,6 +68,9 @@ def test_wrong_field_type_is_rejected():
     bad = packb([m.SCHEMA_VERSION, "ofc.grade", ["high"]])
     with pytest.raises(m.MessageError, match="ofc.grade.eta"):
         m.decode(bad)
+    bad = packb([m.SCHEMA_VERSION, "controller.reset", [1, 2, "not a dict", [], [], False, 0.0, 0.01]])
+    with pytest.raises(m.MessageError, match="controller.reset.params"):
+        m.decode(bad)
 
 
 def test_messages_are_frozen_keyword_only_structs():
