@@ -17,10 +17,8 @@ from typing import ClassVar, Protocol
 import numpy as np
 from pydantic import Field
 
-from .messages import Ack, ControllerReset, MotorCommand, SensorFrame, TrialRequest, TrialResult
+from .messages import _F8, Ack, ControllerReset, MotorCommand, SensorFrame, TrialRequest, TrialResult
 from .module import Module, ModuleParams, on
-
-_F8 = np.dtype(np.float64)
 
 
 class ControllerLink(Protocol):

@@ -153,7 +153,7 @@ class BusLink:
             raise LinkError(f"controller reset for trial {msg.trial_id}: {exc}") from None
 
     def step(self, frame: SensorFrame) -> MotorCommand:
-        clock, decode_command = time.perf_counter, _decode_command
+        clock = time.perf_counter
         if not self._stopping:
             self._abort = None
         self.publisher.put(encode(frame))
@@ -175,7 +175,7 @@ class BusLink:
                 if not data:
                     continue  # a late wake-up from an earlier tick
                 try:
-                    command = decode_command(data)
+                    command = _decode_command(data)
                 except MessageError as exc:
                     log.warning("dropped malformed command: %s", exc)
                     continue
@@ -373,13 +373,7 @@ class Host:
 
     def _stream_loop(self, subscriber, message_type: type[Message]) -> None:
         """Answer lockstep stream messages: decode, handle, publish the reply (one per tick)."""
-        module, lock, publishers = self.module, self._lock, self._publishers
-        # the handler of each message type, bound once (unless the module dispatches by itself)
-        handlers = (
-            {t: getattr(module, name) for t, name in type(module).handles.items()}
-            if type(module).handle is Module.handle
-            else {}
-        )
+        handle, lock, publishers = self.module.handle, self._lock, self._publishers
         recv, decode_stream = subscriber.recv, decoder_for(message_type)
         while True:
             data = recv().payload.to_bytes()
@@ -387,11 +381,8 @@ class Host:
                 return
             try:
                 msg = decode_stream(data)
-                handler = handlers.get(type(msg)) or module.handle
                 with lock:
-                    if module._deferred:  # as Module.handle: deferred work runs before the next message
-                        module.run_deferred()
-                    reply = handler(msg)
+                    reply = handle(msg)
             except MessageError as exc:
                 log.warning("%s: dropped malformed stream message: %s", self.instance, exc)
                 continue

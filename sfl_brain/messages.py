@@ -70,12 +70,11 @@ def _checker(annotation: Any):
         return str
     if annotation is np.ndarray:
         return np.ndarray
-    if origin in (dict,):
+    container = origin or annotation  # dict and dict[str, float] alike
+    if container is dict:
         return dict
-    if origin in (list, tuple):
+    if container in (list, tuple):
         return (list, tuple)
-    if annotation in (dict, list, tuple):
-        return annotation if annotation is dict else (list, tuple)
     if origin in (types.UnionType, typing.Union):
         parts = [_checker(a) for a in typing.get_args(annotation)]
         if any(p is None for p in parts):

@@ -74,6 +74,8 @@ class Module:
         #: the entity path prefix this module logs under (its instance name)
         self.entity = type(self).__name__.lower()
         self._deferred: list[Callable[[], None]] = []
+        #: the handler of each message type, bound once (the control tick dispatches one per tick)
+        self._handlers = {t: getattr(self, name) for t, name in self.handles.items()}
         self.reset(seed)
 
     def reset(self, seed: int) -> None:
@@ -97,10 +99,10 @@ class Module:
         """Dispatch a message to its handler by type."""
         if self._deferred:
             self.run_deferred()
-        name = self.handles.get(type(msg))
-        if name is None:
+        handler = self._handlers.get(type(msg))
+        if handler is None:
             raise TypeError(f"{type(self).__name__} does not handle {msg.TAG!r}")
-        return getattr(self, name)(msg)
+        return handler(msg)
 
     def close(self) -> None:
         """Release resources (physics spaces, files). Called once by the host at exit."""
