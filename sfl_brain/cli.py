@@ -9,8 +9,7 @@ from pathlib import Path
 import click
 
 from .scenario import ScenarioError, load
-
-EXIT_BAD_INPUT = 2
+from .status import EXIT_BAD_INPUT, EXIT_CODES, EXIT_ENVIRONMENT, BadInput, EnvironmentProblem, RunStatus
 
 
 def _load_or_exit(scenario: str, overrides: tuple[str, ...] = (), seed: int | None = None):
@@ -21,7 +20,23 @@ def _load_or_exit(scenario: str, overrides: tuple[str, ...] = (), seed: int | No
         sys.exit(EXIT_BAD_INPUT)
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+def _start_or_exit(start):
+    """Run ``start()``; a problem found before the run exists ends the command with one line."""
+    try:
+        return start()
+    except BadInput as exc:
+        click.echo(f"sfl: {exc}", err=True)
+        sys.exit(EXIT_BAD_INPUT)
+    except EnvironmentProblem as exc:
+        click.echo(f"sfl: {exc}", err=True)
+        sys.exit(EXIT_ENVIRONMENT)
+
+
+@click.group(
+    context_settings={"help_option_names": ["-h", "--help"]},
+    epilog="Exit codes: 0 completed, 1 failed, 2 bad input, 3 stalled, 4 environment "
+    "(port in use, run folder not writable, disk full, no display), 130 interrupted.",
+)
 def main() -> None:
     """sfl-brain: success-failure learning for robots, as processes over Zenoh, recorded in Rerun."""
 
@@ -64,21 +79,20 @@ def run_command(scenario, overrides, seed, out, viewer, viewer_url, realtime, li
             )
 
     with view:
-        run_dir, summary = run(
-            plan,
-            out,
-            viewer=viewer_url or viewer,
-            realtime=realtime,
-            listen=list(listen) or None,
-            connect=list(connect) or None,
-            on_progress=view.update,
-            on_ready=ready,
+        run_dir, summary = _start_or_exit(
+            lambda: run(
+                plan,
+                out,
+                viewer=viewer_url or viewer,
+                realtime=realtime,
+                listen=list(listen) or None,
+                connect=list(connect) or None,
+                on_progress=view.update,
+                on_ready=ready,
+            )
         )
     view.report(run_dir, summary)
-    if summary["status"] == "failed":
-        sys.exit(1)
-    if summary["status"] == "interrupted":
-        sys.exit(130)
+    sys.exit(summary["exit_code"])
 
 
 @main.command()
@@ -92,7 +106,9 @@ def study(scenario, vary, seeds, overrides, out, quiet) -> None:
     """Run SCENARIO once per combination of --vary values and --seeds, then report them together.
 
     Every combination is checked before the first run starts. Runs go to OUT/<name>; the
-    figures and the table (with success rate against vigilance) go to OUT/report.
+    figures and the table (with success rate against vigilance) go to OUT/report. A run that did
+    not complete (stalled, failed) is marked in the table and left out of every mean. The exit
+    code is the worst run's: 1 if any failed, else 3 if any stalled.
     """
     import itertools
 
@@ -120,25 +136,34 @@ def study(scenario, vary, seeds, overrides, out, quiet) -> None:
             name += "" if seed is None else f"_seed{seed}"
             runs.append((name, _load_or_exit(scenario, sets, seed)))
     click.echo(f"sfl: study of {len(runs)} runs into {out}")
-    done, failed = [], []
+    done: list[Path] = []
+    unfinished: dict[str, list[str]] = {}
     for i, (name, plan) in enumerate(runs, 1):
         view = ProgressView(plan, enabled=not quiet)
         click.echo(f"sfl: [{i}/{len(runs)}] {name}")
         with view:
-            run_dir, summary = run(
-                plan, out / name, on_progress=view.update, on_ready=lambda sup, s, v=view: v.ready(s)
+            run_dir, summary = _start_or_exit(
+                lambda plan=plan, name=name, view=view: run(
+                    plan, out / name, on_progress=view.update, on_ready=lambda sup, s, v=view: v.ready(s)
+                )
             )
         view.report(run_dir, summary)
-        if summary["status"] == "interrupted":
-            sys.exit(130)
+        if summary["status"] == RunStatus.INTERRUPTED:
+            sys.exit(summary["exit_code"])
         done.append(run_dir)
-        if summary["status"] == "failed":
-            failed.append(name)
+        if summary["status"] != RunStatus.COMPLETED:
+            unfinished.setdefault(summary["status"], []).append(name)
     path = write_report(done, out / "report")
     click.echo(f"sfl: report written to {path}")
-    if failed:
-        click.echo(f"sfl: {len(failed)} of {len(runs)} runs failed: {', '.join(failed)}", err=True)
-        sys.exit(1)
+    for status, names in unfinished.items():
+        click.echo(
+            f"sfl: {len(names)} of {len(runs)} runs {status}, marked in the report and left out of its means: "
+            f"{', '.join(names)}",
+            err=True,
+        )
+    for status in (RunStatus.FAILED, RunStatus.STALLED):
+        if status in unfinished:
+            sys.exit(EXIT_CODES[status])
 
 
 @main.command("list")
@@ -173,6 +198,9 @@ def inspect(run_dir: Path, as_json: bool) -> None:
     except FileNotFoundError as exc:
         click.echo(f"sfl: {exc}", err=True)
         sys.exit(EXIT_BAD_INPUT)
+    except OSError as exc:
+        click.echo(f"sfl: cannot read {run_dir}: {exc.strerror or exc}", err=True)
+        sys.exit(EXIT_ENVIRONMENT)
     if as_json:
         click.echo(json.dumps(summary))
         return
@@ -220,8 +248,17 @@ def worker(scenario, connect, run_id, name, overrides) -> None:
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("docs/results"))
 def report(run_dirs, out) -> None:
     """Write the figures (PNG) and a Markdown table of RUN_DIRS to OUT."""
+    from .records import run_status
     from .report import write_report
 
+    for run_dir in run_dirs:
+        if not (run_dir / "scenario.yaml").exists():
+            click.echo(f"sfl: {run_dir}: no scenario.yaml (is this a run folder?)", err=True)
+            sys.exit(EXIT_BAD_INPUT)
+    for run_dir in run_dirs:
+        status, why = run_status(run_dir)
+        if status != RunStatus.COMPLETED:
+            click.echo(f"sfl: {run_dir} is {status} ({why}): marked in the report, left out of its means", err=True)
     path = write_report(list(run_dirs), out)
     click.echo(f"sfl: report written to {path}")
 

@@ -27,6 +27,7 @@ class ProgressView:
             transient=False,
         )
         self.task = None
+        self.warned = False
 
     def __enter__(self):
         self.bar.start()
@@ -51,20 +52,34 @@ class ProgressView:
             status += f"  s_vig {p.s_vig:+.3f}"
         if p.decisions:
             status += f"  decisions {p.decisions}"
+        warning = p.stall_warning()
+        if warning:
+            status += f"  [bold yellow]{warning}[/]"
+        if warning and not self.warned and not self.enabled:
+            self.console.print(f"[yellow]sfl: {warning}[/]")  # no bar to show it on: say it once
+            self.warned = True
         self.bar.update(self.task, total=p.planned, completed=p.trials, status=status)
 
     def report(self, run_dir: Path, summary: dict) -> None:
         c = self.console
-        colour = {"completed": "green", "failed": "red", "interrupted": "yellow"}[summary["status"]]
-        c.print(f"[{colour}]{summary['status']}[/]: {run_dir}")
-        if summary.get("reason"):
-            c.print(f"  reason: {summary['reason']}")
+        colour = {"completed": "green", "failed": "red", "stalled": "yellow", "interrupted": "yellow"}.get(
+            summary["status"], "red"
+        )
+        c.print(f"[bold {colour}]{summary['status']}[/] (exit code {summary.get('exit_code')}): {run_dir}")
+        if summary.get("stop_reason"):
+            c.print(f"  stop reason: {summary['stop_reason']}", markup=False, highlight=False)
         rate = summary.get("success_rate")
+        planned = summary.get("planned_trials")
         c.print(
-            f"  trials {summary['trials']} (successes {summary['successes']}, failures {summary['failures']}), "
+            f"  trials {summary['trials']}{f' of {planned}' if planned is not None else ''} "
+            f"(successes {summary['successes']}, failures {summary['failures']}), "
             f"decisions {summary['decisions']} (no-go {summary['no_go']}), "
             f"success rate {'-' if rate is None else f'{rate:.1%}'}, "
             f"final vigilance {summary['final_vigilance'] if summary['final_vigilance'] is not None else '-'}, "
             f"wall {summary['wall_time_s']:.1f} s"
         )
+        dropped = summary.get("dropped") or {}
+        total = sum(n for counts in dropped.values() for n in counts.values())
+        if total:
+            c.print(f"  dropped {total} messages that were not the run's own (by process: logs/*.counters.json)")
         c.print(f"  inspect: sfl inspect {run_dir}    view: rerun {run_dir / 'recording.rrd'}")

@@ -40,6 +40,36 @@ class Progress:
     decisions: int = 0
     s_vig: float | None = None
     last: dict = field(default_factory=dict)
+    #: the learn protocol's stall limits (None for protocols that cannot stall)
+    max_decisions: int | None = None
+    stall_decisions: int | None = None
+    #: no-go decisions since the last go
+    consecutive_nogo: int = 0
+    #: decisions per trial over the recent trials (learn protocol)
+    recent_decisions_per_trial: float | None = None
+
+    def stall_warning(self) -> str | None:
+        """Why the run is likely to stop before its budget at the current no-go ratio, or None."""
+        if self.max_decisions is None:
+            return None
+        left = self.planned - self.trials
+        if left <= 0:
+            return None
+        if self.stall_decisions and self.consecutive_nogo >= self.stall_decisions // 4:
+            return (
+                f"stall likely: {self.consecutive_nogo} no-go decisions in a row "
+                f"(the run stops as stalled at {self.stall_decisions})"
+            )
+        per_trial = self.recent_decisions_per_trial
+        if per_trial is None and self.trials == 0 and self.decisions >= self.max_decisions // 10:
+            return f"stall likely: {self.decisions} decisions and no trial yet (cap {self.max_decisions})"
+        if per_trial is not None and self.decisions + left * per_trial > self.max_decisions:
+            reachable = self.trials + int(max(0, self.max_decisions - self.decisions) / per_trial)
+            return (
+                f"stall likely: {per_trial:.0f} decisions per trial lately; the cap of {self.max_decisions} "
+                f"decisions stops the run near trial {reachable} of {self.planned}"
+            )
+        return None
 
 
 class Conductor:
@@ -151,12 +181,15 @@ def run_learn(c: Conductor) -> dict:
     proto = c.plan.scenario.protocol
     dim = c.plan.dim
     rng = np.random.default_rng(np.random.SeedSequence([c.plan.scenario.seed, 1]))
-    progress = Progress(planned=proto.trials)
+    progress = Progress(planned=proto.trials, max_decisions=proto.max_decisions, stall_decisions=proto.stall_decisions)
     threshold: m.Threshold = c.call(m.VigilanceStart())
     n_success = n_failure = 0
     decision = 0
     consecutive_nogo = 0
-    stop_reason = "trial budget spent"
+    stop_reason = f"trial budget spent ({proto.trials} trials)"
+    stalled = False
+    trial_decisions: deque[int] = deque(maxlen=20)  # decisions each recent trial took (progress estimate)
+    decisions_at_last_trial = 0
     # Candidates are drawn one stream, in order, whatever the batch: a batch is only how many of
     # the next draws ACC evaluates in one request. Draws left over after a go are evaluated again
     # (against the maps after learning) in the next request, so records do not depend on batch.
@@ -166,7 +199,18 @@ def run_learn(c: Conductor) -> dict:
     last_go = -1  # index of the last go decision
     while progress.trials < proto.trials:
         if decision >= proto.max_decisions:
-            stop_reason = f"max_decisions ({proto.max_decisions}) reached"
+            stalled = True
+            stop_reason = (
+                f"decision cap reached: {decision} decisions (protocol.max_decisions) gave "
+                f"{progress.trials} of {proto.trials} trials"
+            )
+            break
+        if consecutive_nogo >= proto.stall_decisions:
+            stalled = True
+            stop_reason = (
+                f"no progress: {consecutive_nogo} decisions in a row without a trial (protocol.stall_decisions) "
+                f"after {progress.trials} of {proto.trials} trials"
+            )
             break
         if len(pool) < batch:
             pool = np.concatenate([pool, rng.random((batch - len(pool), dim))])
@@ -200,13 +244,16 @@ def run_learn(c: Conductor) -> dict:
             if consecutive_nogo % 1000 == 0:
                 rejected_update = consecutive_nogo
                 break  # the threshold may change: evaluate the next draws against the new one
-            if decision >= proto.max_decisions:
+            if decision >= proto.max_decisions or consecutive_nogo >= proto.stall_decisions:
                 break
         pool = pool[used:]
         if c.plan.scenario.record.decisions:
             c.writer.write_many(rows)
         c.rr.decisions(rows)
         progress.decisions = decision
+        progress.consecutive_nogo = consecutive_nogo
+        if chosen is None:
+            c.on_progress(progress)  # a long run of no-go decisions shows (and warns) while it lasts
         if chosen is None:  # no go in the whole batch: look further ahead next time
             batch = min(proto.batch, 2 * batch)
         else:
@@ -237,6 +284,9 @@ def run_learn(c: Conductor) -> dict:
         progress.trials += 1
         progress.successes = n_success
         progress.s_vig = threshold.s_vig
+        trial_decisions.append(decision - decisions_at_last_trial)
+        decisions_at_last_trial = decision
+        progress.recent_decisions_per_trial = sum(trial_decisions) / len(trial_decisions)
         row = {
             "kind": "trial",
             "trial": trial_id,
@@ -260,7 +310,12 @@ def run_learn(c: Conductor) -> dict:
         }
         c.record_trial(progress, row)
     finish: m.Ack = c.call(m.Finish(path=str(c.run_dir / "acc.npz"), prune=proto.prune_failure_map))
-    return {"stop_reason": stop_reason, "acc": finish.detail}
+    return {
+        "planned_trials": proto.trials,
+        "stalled": stalled,
+        "stop_reason": stop_reason,
+        "acc": finish.detail,
+    }
 
 
 def grid_points(plan: Plan) -> np.ndarray:
@@ -291,7 +346,7 @@ def run_sweep(c: Conductor) -> dict:
             **{f"m_{k}": val for k, val in result.metrics.items()},
         }
         c.record_trial(progress, row)
-    return {"grid_points": len(points)}
+    return {"planned_trials": len(points), "stop_reason": f"every grid point run ({len(points)})"}
 
 
 def run_exploit(c: Conductor) -> dict:
@@ -335,7 +390,11 @@ def run_exploit(c: Conductor) -> dict:
             **{f"m_{k}": val for k, val in result.metrics.items()},
         }
         c.record_trial(progress, row)
-    return {"switching_table_size": len(conditions)}
+    return {
+        "planned_trials": proto.trials,
+        "stop_reason": f"trial budget spent ({proto.trials} trials)",
+        "switching_table_size": len(conditions),
+    }
 
 
 PROTOCOLS = {"learn": run_learn, "sweep": run_sweep, "exploit": run_exploit}

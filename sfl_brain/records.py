@@ -8,8 +8,9 @@ A run folder holds:
   or ``pyarrow.json.read_json``); a kill loses at most the line being written;
 * ``recording.rrd``: the Rerun recording (per-process parts under ``rerun/`` until merged);
 * ``acc.npz``: the learnt maps (learn protocol);
-* ``summary.json``: written at the end; ``sfl inspect`` rebuilds it from the records
-  when the run was interrupted;
+* ``summary.json``: written at the end, status first (``completed``, ``stalled``, ``failed``,
+  ``interrupted``) with its ``stop_reason``; ``sfl inspect`` rebuilds the counts from the records
+  when the run was killed before writing it;
 * ``logs/``: one log file per module process.
 """
 
@@ -21,6 +22,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from .status import EnvironmentProblem
 
 SUMMARY_FIELDS = (
     "trials",
@@ -50,37 +53,69 @@ def _plain(value: Any) -> Any:
 
 
 class RecordWriter:
-    """Append rows to ``records.jsonl``, one line each, flushed per row."""
+    """Append rows to ``records.jsonl``, one line each, flushed per row.
+
+    A write the machine refuses (a full disk, a folder gone read-only) raises
+    :class:`EnvironmentProblem` with one line; the rows written before it stay whole.
+    """
 
     def __init__(self, path: Path) -> None:
         self.path = path
-        self._file = open(path, "a", encoding="utf-8")  # noqa: SIM115 - kept open for the run
+        try:
+            self._file = open(path, "a", encoding="utf-8")  # noqa: SIM115 - kept open for the run
+        except OSError as exc:
+            raise EnvironmentProblem(f"cannot write {path}: {exc.strerror or exc}") from None
+
+    def _append(self, text: str) -> None:
+        try:
+            self._file.write(text)
+            self._file.flush()
+        except OSError as exc:
+            raise EnvironmentProblem(f"cannot write {self.path}: {exc.strerror or exc}") from None
 
     def write(self, row: dict) -> None:
-        self._file.write(json.dumps(_plain(row), separators=(",", ":")) + "\n")
-        self._file.flush()
+        self._append(json.dumps(_plain(row), separators=(",", ":")) + "\n")
 
     def write_many(self, rows: list[dict]) -> None:
         if rows:
-            self._file.write("".join(json.dumps(_plain(r), separators=(",", ":")) + "\n" for r in rows))
-            self._file.flush()
+            self._append("".join(json.dumps(_plain(r), separators=(",", ":")) + "\n" for r in rows))
 
     def close(self) -> None:
-        self._file.close()
+        try:
+            self._file.close()
+        except OSError:  # the last flush failed (full disk): what was written before stays
+            pass
 
 
-def read_records(run_dir: Path) -> list[dict]:
-    """All complete rows of a run's records (a truncated last line is skipped)."""
+def read_records(run_dir: Path, damage: list[str] | None = None) -> list[dict]:
+    """The rows of a run's records up to the last whole row.
+
+    A torn last line (the row in flight when the run was killed) is left out. A damaged line
+    before the end (bytes that are not UTF-8 or not a JSON object) ends the reading there: the
+    rows after it cannot be trusted to follow it. What was left out is described in ``damage``.
+    """
     path = Path(run_dir) / "records.jsonl"
-    rows = []
+    rows: list[dict] = []
     if not path.exists():
         return rows
-    with open(path, encoding="utf-8") as f:
-        for line in f:
-            try:
-                rows.append(json.loads(line))
-            except json.JSONDecodeError:
-                continue  # the line in flight when the run was killed
+    with open(path, "rb") as f:
+        data = f.read()
+    lines = data.split(b"\n")
+    torn_tail = lines[-1] != b""  # no newline at the end: the last row was being written
+    if not torn_tail:
+        lines.pop()
+    for number, line in enumerate(lines, 1):
+        try:
+            row = json.loads(line.decode("utf-8"))
+            if not isinstance(row, dict):
+                raise ValueError("not a JSON object")
+        except (UnicodeDecodeError, ValueError) as exc:
+            if damage is not None:
+                last = number == len(lines) and torn_tail
+                what = "a torn last row (the run was killed while writing it)" if last else f"a damaged row ({exc})"
+                damage.append(f"records.jsonl line {number}: {what}; read the {len(rows)} rows before it")
+            break
+        rows.append(row)
     return rows
 
 
@@ -107,20 +142,44 @@ def summarise(rows: list[dict], wall_time_s: float | None = None) -> dict:
 
 
 def inspect_run(run_dir: Path) -> dict:
-    """Summary of a finished or interrupted run."""
+    """Summary of a finished, stopped or killed run: status and stop reason first, then the counts
+    rebuilt from the records."""
     run_dir = Path(run_dir)
     if not (run_dir / "records.jsonl").exists():
         raise FileNotFoundError(f"{run_dir}: no records.jsonl (is this a run folder?)")
-    summary_path = run_dir / "summary.json"
-    stored = {}
-    if summary_path.exists():
-        try:
-            stored = json.loads(summary_path.read_text())
-        except json.JSONDecodeError:
-            stored = {}
+    stored: dict = {}
+    try:
+        loaded = json.loads((run_dir / "summary.json").read_text())
+        stored = loaded if isinstance(loaded, dict) else {}
+    except (OSError, ValueError):
+        stored = {}
     wall = stored.get("wall_time_s")
     if wall is None:
         started = run_dir / "started"
         if started.exists():
             wall = max(0.0, (run_dir / "records.jsonl").stat().st_mtime - started.stat().st_mtime)
-    return summarise(read_records(run_dir), wall)
+    damage: list[str] = []
+    counts = summarise(read_records(run_dir, damage), wall)
+    if stored.get("status"):
+        head = {"status": stored["status"], "stop_reason": stored.get("stop_reason", stored.get("reason", ""))}
+    else:
+        head = {
+            "status": "unfinished",
+            "stop_reason": "no summary.json: the run was killed, or is still running",
+        }
+    head["planned_trials"] = stored.get("planned_trials")
+    out = {**head, **counts}
+    if damage:
+        out["records_damage"] = "; ".join(damage)
+    return out
+
+
+def run_status(run_dir: Path) -> tuple[str, str]:
+    """(status, stop_reason) of a run folder, from its summary (``unfinished`` when it has none)."""
+    try:
+        stored = json.loads((Path(run_dir) / "summary.json").read_text())
+    except (OSError, ValueError):
+        return "unfinished", "no summary.json: the run was killed, or is still running"
+    if not isinstance(stored, dict) or "status" not in stored:
+        return "unfinished", "summary.json has no status"
+    return str(stored["status"]), str(stored.get("stop_reason", stored.get("reason", "")))

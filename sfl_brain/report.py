@@ -2,9 +2,13 @@
 
 * a sweep run: the viability map over the first two axes (success coloured by walking speed);
 * a learn run: both maps after learning (from ``acc.npz``) over the tried points;
-* for every run a table row: protocol, vigilance, trials, success rate, next to the thesis's figure;
+* for every run a table row: status first, then protocol, vigilance, trials, success rate, next to
+  the thesis's figure;
 * learn runs at two or more fixed vigilance values: success rate against s_vig, every seed a dot,
   the mean a line, the thesis's E3.2 values as crosses (Fig. 3.13), and a table of the means.
+
+Only ``completed`` runs enter a mean. A stalled, failed, interrupted or unfinished run keeps its row
+(its status and stop reason shown) and is listed under the figure as left out.
 """
 
 from __future__ import annotations
@@ -19,7 +23,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import yaml  # noqa: E402
 
-from .records import read_records, summarise  # noqa: E402
+from .records import read_records, run_status, summarise  # noqa: E402
 
 
 def _figure(run_dir: Path, out: Path, scenario: dict, rows: list[dict]) -> str:
@@ -125,14 +129,19 @@ def write_report(run_dirs: list[Path], out: Path) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     groups: dict[str, list[tuple[float, float, int]]] = {}
     group_thesis: dict[str, dict] = {}
+    left_out: dict[str, list[str]] = {}
+    statuses: dict[str, dict] = {}
     lines = [
-        "| run | protocol | s_vig | trials | success rate | thesis | figure |",
-        "|---|---|---|---|---|---|---|",
+        "| run | status | protocol | s_vig | trials | success rate | thesis | figure |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for run_dir in run_dirs:
         scenario = yaml.safe_load((run_dir / "scenario.yaml").read_text())
         rows = read_records(run_dir)
         summary = summarise(rows)
+        status, why = run_status(run_dir)
+        statuses[str(run_dir)] = {"status": status, "stop_reason": why}
+        completed = status == "completed"
         vig = scenario.get("modules", {}).get("vigilance", {}).get("params", {})
         s_vig = vig.get("value") if vig.get("mode", "fixed") == "fixed" else vig.get("mode")
         learn = scenario["protocol"]["kind"] == "learn"
@@ -142,19 +151,40 @@ def write_report(run_dirs: list[Path], out: Path) -> Path:
         rate = summary["success_rate"]
         if learn and isinstance(s_vig, int | float):
             group = "-".join(a["name"] for a in scenario["space"])
-            groups.setdefault(group, []).append(
-                (float(s_vig), float("nan") if rate is None else float(rate), int(summary["trials"]))
-            )
+            if completed:
+                groups.setdefault(group, []).append(
+                    (float(s_vig), float("nan") if rate is None else float(rate), int(summary["trials"]))
+                )
+            else:
+                left_out.setdefault(group, []).append(f"{run_dir.name} (s_vig {s_vig}): {status}, {why}")
             group_thesis[group] = rates if group_thesis.get(group, rates) == rates else {}
+        shown_status = status if completed else f"**{status}**"
         lines.append(
-            f"| {run_dir.name} | {scenario['protocol']['kind']} | {s_vig if s_vig is not None else '-'} | "
+            f"| {run_dir.name} | {shown_status} | {scenario['protocol']['kind']} | "
+            f"{s_vig if s_vig is not None else '-'} | "
             f"{summary['trials']} | {'-' if rate is None else f'{rate:.1%}'} | {thesis} | "
             f"{f'![]({figure})' if figure else ''} |"
         )
     vigilance_lines = []
-    for group, points in groups.items():
-        vigilance_lines += _vigilance_figure(points, out, group, group_thesis[group])
+    for group in {**groups, **left_out}:
+        vigilance_lines += _vigilance_figure(groups.get(group, []), out, group, group_thesis[group])
+        if left_out.get(group):
+            vigilance_lines += [
+                "",
+                f"Left out of the means above: {len(left_out[group])} runs that did not complete:",
+                "",
+            ]
+            vigilance_lines += [f"- {text}" for text in left_out[group]]
+    unfinished = [d for d, st in statuses.items() if st["status"] != "completed"]
+    head = "# Results\n\n"
+    if unfinished:
+        head += (
+            f"{len(unfinished)} of {len(run_dirs)} runs did not complete (status in bold); "
+            "they are shown but enter no mean.\n\n"
+        )
     path = out / "README.md"
-    path.write_text("# Results\n\n" + "\n".join(lines + vigilance_lines) + "\n")
-    (out / "summary.json").write_text(json.dumps({str(d): summarise(read_records(d)) for d in run_dirs}, indent=1))
+    path.write_text(head + "\n".join(lines + vigilance_lines) + "\n")
+    (out / "summary.json").write_text(
+        json.dumps({str(d): {**statuses[str(d)], **summarise(read_records(d))} for d in run_dirs}, indent=1)
+    )
     return path

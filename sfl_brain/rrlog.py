@@ -14,11 +14,14 @@ Entity paths (every process logs into the same recording id):
 
 from __future__ import annotations
 
+import logging
 import time
 
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
+
+log = logging.getLogger("sfl.rrlog")
 
 SUCCESS = (40, 170, 60)
 FAILURE = (210, 50, 50)
@@ -55,6 +58,7 @@ class RerunLog:
         self._decisions: list[dict] = []
         self._trials: list[dict] = []
         self._flushed = time.monotonic()
+        self.broken = False  # the sink failed: stop sending, say so once
         self.rec.log("omega", rr.TextDocument("Parameter space axes (unit square): " + ", ".join(axes)), static=True)
 
     #: rows are buffered and sent as columns (one call per series) at most this often, and at close
@@ -79,12 +83,22 @@ class RerunLog:
 
     def flush(self) -> None:
         self._flushed = time.monotonic()
-        rows, self._decisions = self._decisions, []
-        if rows:
-            self._send_decisions(rows)
-        rows, self._trials = self._trials, []
-        if rows:
-            self._send_trials(rows)
+        decisions, self._decisions = self._decisions, []
+        trials, self._trials = self._trials, []
+        if self.broken:
+            return
+        try:
+            if decisions:
+                self._send_decisions(decisions)
+            if trials:
+                self._send_trials(trials)
+        except RuntimeError as exc:  # the recording's sink died (a full disk): the records still hold it all
+            self._broke(exc)
+
+    def _broke(self, exc: Exception) -> None:
+        if not self.broken:
+            log.warning("the Rerun recording stopped (%s); records.jsonl keeps every row", exc)
+        self.broken = True
 
     def _send_decisions(self, rows: list[dict]) -> None:
         index = [rr.TimeColumn("decision", sequence=np.array([r["decision"] for r in rows]))]
@@ -159,5 +173,8 @@ class RerunLog:
 
     def close(self) -> None:
         self.flush()
-        self.rec.flush()
+        try:
+            self.rec.flush()
+        except RuntimeError as exc:
+            self._broke(exc)
         self.rec.disconnect()

@@ -1,14 +1,24 @@
-"""``sfl run``: launch a validated plan, run its protocol, and leave a complete run folder."""
+"""``sfl run``: launch a validated plan, run its protocol, and leave a complete run folder.
+
+The run's status is decided here (see :mod:`sfl_brain.status`): ``completed`` only when the
+protocol ran its whole budget, ``stalled`` when it stopped early on its own, ``failed`` when a
+module or the machine let it down, ``interrupted`` on Ctrl-C / SIGTERM. Whatever happens, the
+children are stopped, the records closed, the recording merged and ``summary.json`` written.
+"""
 
 from __future__ import annotations
 
+import errno
 import json
+import logging
+import os
 import shutil
 import signal
 import socket
 import subprocess
 import sys
 import time
+import traceback
 import uuid
 from collections.abc import Callable
 from datetime import datetime
@@ -19,8 +29,11 @@ import yaml
 from .protocols import PROTOCOLS, Conductor, Progress
 from .records import RecordWriter, read_records, summarise
 from .rrlog import RerunLog
-from .runtime import RunError, Supervisor
+from .runtime import RunError, Supervisor, kill_quietly
 from .scenario import Plan
+from .status import EXIT_CODES, EXIT_ENVIRONMENT, BadInput, EnvironmentProblem, RunStatus
+
+log = logging.getLogger("sfl.run")
 
 
 def default_run_dir(plan: Plan) -> Path:
@@ -53,13 +66,76 @@ def merge_recordings(run_dir: Path) -> Path | None:
     return target
 
 
+def has_display() -> bool:
+    """Whether a native viewer window can open here (X11 or Wayland on Linux/BSD; always elsewhere)."""
+    if not sys.platform.startswith(("linux", "freebsd", "openbsd", "netbsd")):
+        return True
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def check_viewer() -> str:
+    """The ``rerun`` command a native viewer starts with; :class:`EnvironmentProblem` (exit code 4) at
+    once where no window can open, instead of a viewer that hangs."""
+    if not has_display():
+        raise EnvironmentProblem(
+            "--viewer needs a display (DISPLAY / WAYLAND_DISPLAY is not set). The run folder keeps the "
+            "recording anyway: open recording.rrd on a machine with a screen, or stream to a viewer "
+            "that is already running with --viewer-url (for a browser: `rerun --serve-web --bind 127.0.0.1`)"
+        )
+    rerun_cli = shutil.which("rerun")
+    if rerun_cli is None:
+        raise EnvironmentProblem("--viewer needs the `rerun` command (pip install rerun-sdk); none is on PATH")
+    return rerun_cli
+
+
 def start_viewer() -> tuple[subprocess.Popen, str]:
+    """Spawn a native Rerun viewer on 127.0.0.1."""
+    rerun_cli = check_viewer()
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    rerun_cli = shutil.which("rerun") or "rerun"
     proc = subprocess.Popen([rerun_cli, "--bind", "127.0.0.1", "--port", str(port)])
-    return proc, f"rerun+http://127.0.0.1:{port}/proxy"
+    try:
+        code = proc.wait(timeout=1.0)  # a viewer that cannot start says so at once
+    except subprocess.TimeoutExpired:
+        return proc, f"rerun+http://127.0.0.1:{port}/proxy"
+    raise EnvironmentProblem(f"the Rerun viewer exited at start with code {code}; run without --viewer")
+
+
+def prepare_run_dir(run_dir: Path) -> None:
+    """Make the run folder, or say in one line why it cannot be used (before any process starts).
+
+    A folder that already holds a run is bad input (exit code 2): records are never overwritten.
+    A folder that cannot be made or written is the environment's problem (exit code 4).
+    """
+    if run_dir.exists() and not run_dir.is_dir():
+        raise BadInput(f"--out {run_dir} is a file, not a folder")
+    for held in ("records.jsonl", "summary.json"):
+        if (run_dir / held).exists():
+            raise BadInput(f"--out {run_dir} already holds a run ({held}); choose another folder")
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        probe = run_dir / ".sfl-write-probe"
+        probe.write_bytes(b"ok")
+        probe.unlink()
+    except OSError as exc:
+        raise EnvironmentProblem(f"cannot write the run folder {run_dir}: {exc.strerror or exc}") from None
+
+
+def _counters(run_dir: Path, sup: Supervisor) -> dict:
+    """Messages dropped during the run, by process and reason (malformed, unauthenticated, stale...)."""
+    dropped: dict[str, dict] = {}
+    own = getattr(sup, "dropped", None)
+    if own:
+        dropped["supervisor"] = dict(own)
+    for path in sorted((run_dir / "logs").glob("*.counters.json")):
+        try:
+            counts = json.loads(path.read_text()).get("dropped", {})
+        except (OSError, ValueError, AttributeError):
+            continue
+        if counts:
+            dropped[path.name.removesuffix(".counters.json")] = counts
+    return dropped
 
 
 class _Terminate(Exception):
@@ -76,22 +152,37 @@ def run(
     connect: list[str] | None = None,
     on_progress: Callable[[Progress], None] | None = None,
     on_ready: Callable[[Supervisor, float], None] | None = None,
+    supervisor_options: dict | None = None,
 ) -> tuple[Path, dict]:
-    """Run a scenario plan to the end; returns (run folder, summary). Raises nothing for module deaths:
-    the summary's ``status`` says ``completed``, ``failed`` or ``interrupted``."""
+    """Run a scenario plan to its end; returns (run folder, summary).
+
+    Raises :class:`BadInput` or :class:`EnvironmentProblem` only before anything started (a run
+    folder that holds a run or cannot be written, no display for ``--viewer``). After that it
+    raises nothing: the summary's ``status`` is ``completed``, ``stalled``, ``failed`` or
+    ``interrupted``, with ``stop_reason`` and the ``exit_code`` the CLI ends with.
+    """
     run_dir = Path(out) if out else default_run_dir(plan)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    if (run_dir / "records.jsonl").exists():
-        raise RunError(f"{run_dir} already holds a run; choose another --out")
+    if viewer is True:
+        check_viewer()
+    prepare_run_dir(run_dir)
+    viewer_proc, viewer_url = None, None
+    if viewer:
+        viewer_proc, viewer_url = start_viewer() if viewer is True else (None, viewer)
     run_id = uuid.uuid4().hex[:12]
     resolved = dict(plan.raw, seed=plan.scenario.seed)
     (run_dir / "scenario.yaml").write_text(yaml.safe_dump(resolved, sort_keys=False))
     (run_dir / "started").write_text(datetime.now().isoformat() + "\n")
-    viewer_proc, viewer_url = None, None
-    if viewer:
-        viewer_proc, viewer_url = start_viewer() if viewer is True else (None, viewer)
     writer = RecordWriter(run_dir / "records.jsonl")
-    sup = Supervisor(plan, run_dir, run_id, listen=listen, connect=connect, viewer=viewer_url, realtime=realtime)
+    sup = Supervisor(
+        plan,
+        run_dir,
+        run_id,
+        listen=listen,
+        connect=connect,
+        viewer=viewer_url,
+        realtime=realtime,
+        **(supervisor_options or {}),
+    )
     (run_dir / "rerun").mkdir(exist_ok=True)
     rr_log = RerunLog(
         run_id,
@@ -100,33 +191,101 @@ def run(
         [a.name for a in plan.scenario.space],
     )
     started = time.perf_counter()
-    status, reason, extra = "completed", "", {}
-    previous = signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(_Terminate()))
+    status, reason, exit_code, extra = RunStatus.COMPLETED, "", None, {}
+    stopping = {"signals": 0, "cleaning": False}
+    cleanup: list[str] = []
+
+    def on_signal(signum, _frame):
+        stopping["signals"] += 1
+        if not stopping["cleaning"] and stopping["signals"] == 1:
+            raise KeyboardInterrupt if signum == signal.SIGINT else _Terminate()
+        # a second signal (or one while the run is already stopping): the fast path. Kill the
+        # children now instead of waiting for them; the records, summary and recording are still
+        # written, because this handler never raises during the clean-up.
+        print("sfl: stopping now: module processes killed; writing the summary", file=sys.stderr, flush=True)
+        for pid in sup.pids():
+            kill_quietly(pid)
+
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        sup.start()
-        if on_ready:
-            on_ready(sup, time.perf_counter() - started)
-        conductor = Conductor(plan, sup, writer, rr_log, run_dir, on_progress)
-        extra = PROTOCOLS[plan.scenario.protocol.kind](conductor)
-    except (KeyboardInterrupt, _Terminate):
-        status, reason = "interrupted", "stopped by signal"
-    except RunError as exc:
-        status, reason = "failed", str(exc)
+        try:
+            sup.start()
+            if on_ready:
+                on_ready(sup, time.perf_counter() - started)
+            conductor = Conductor(plan, sup, writer, rr_log, run_dir, on_progress)
+            extra = PROTOCOLS[plan.scenario.protocol.kind](conductor)
+        except (KeyboardInterrupt, _Terminate):
+            status, reason = RunStatus.INTERRUPTED, "stopped by signal (Ctrl-C or SIGTERM)"
+        except RunError as exc:
+            status, reason = RunStatus.FAILED, str(exc)
+        except EnvironmentProblem as exc:
+            status, reason, exit_code = RunStatus.FAILED, str(exc), EXIT_ENVIRONMENT
+        except OSError as exc:
+            status, reason = RunStatus.FAILED, f"{exc.strerror or exc}" + (f": {exc.filename}" if exc.filename else "")
+            if exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM):
+                exit_code = EXIT_ENVIRONMENT
+        except Exception as exc:  # a bug of ours or of a protocol: say so, keep the traceback in logs/
+            status, reason = RunStatus.FAILED, f"internal error: {type(exc).__name__}: {exc} (see logs/_run.log)"
+            _log_internal(run_dir)
+        finally:
+            stopping["cleaning"] = True
+            # every step runs whatever the others did: a full disk must not cost the summary
+            for step in (
+                lambda: sup.stop(grace=0.0 if stopping["signals"] > 1 else 3.0),
+                writer.close,
+                rr_log.close,
+                lambda: merge_recordings(run_dir),
+            ):
+                try:
+                    step()
+                except Exception as exc:  # noqa: BLE001 - reported in the summary, never raised
+                    cleanup.append(f"{type(exc).__name__}: {exc}")
+                    _log_internal(run_dir)
     finally:
-        signal.signal(signal.SIGTERM, previous)
-        sup.stop()
-        writer.close()
-        rr_log.close()
-        merge_recordings(run_dir)
-    summary = summarise(read_records(run_dir), time.perf_counter() - started)
-    summary.update(
-        status=status,
-        reason=reason,
-        run_id=run_id,
-        scenario=plan.scenario.name,
-        seed=plan.scenario.seed,
-        protocol=plan.scenario.protocol.kind,
-        **extra,
-    )
-    (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    if cleanup:
+        reason += ("; " if reason else "") + "while stopping: " + "; ".join(cleanup)
+    rows = read_records(run_dir)
+    if status == RunStatus.COMPLETED:
+        status, reason = _judge(extra, sum(1 for r in rows if r.get("kind") == "trial"))
+    if status == RunStatus.INTERRUPTED and stopping["signals"] > 1:
+        reason += "; stopped at once by a second signal"
+    summary = {
+        "status": str(status),
+        "stop_reason": reason,
+        "exit_code": exit_code if exit_code is not None else EXIT_CODES[status],
+        **summarise(rows, time.perf_counter() - started),
+        "planned_trials": extra.get("planned_trials"),
+        "run_id": run_id,
+        "scenario": plan.scenario.name,
+        "seed": plan.scenario.seed,
+        "protocol": plan.scenario.protocol.kind,
+        "dropped": _counters(run_dir, sup),
+        **{k: v for k, v in extra.items() if k not in ("planned_trials", "stop_reason", "stalled")},
+    }
+    try:
+        (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    except OSError as exc:
+        summary["exit_code"] = EXIT_ENVIRONMENT
+        summary["stop_reason"] += f"; summary.json not written: {exc.strerror or exc}"
     return run_dir, summary
+
+
+def _judge(extra: dict, trials: int) -> tuple[RunStatus, str]:
+    """The status of a protocol that returned: completed only if its records hold its whole budget."""
+    reason = extra.get("stop_reason", "")
+    if extra.get("stalled"):
+        return RunStatus.STALLED, reason
+    planned = extra.get("planned_trials")
+    if planned is not None and trials < planned:
+        return RunStatus.STALLED, f"the protocol ended after {trials} of {planned} trials ({reason})"
+    return RunStatus.COMPLETED, reason
+
+
+def _log_internal(run_dir: Path) -> None:
+    try:
+        with open(run_dir / "logs" / "_run.log", "a", encoding="utf-8") as f:
+            f.write(traceback.format_exc())
+    except OSError:
+        pass

@@ -62,7 +62,12 @@ class LearnProtocol(Strict):
     kind: Literal["learn"]
     trials: int = Field(ge=1, le=1_000_000, description="trial budget: go decisions")
     batch: int = Field(64, ge=1, le=65_536, description="candidates drawn and evaluated per request")
-    max_decisions: int = Field(2_000_000, ge=1, description="stop when this many decisions were made")
+    max_decisions: int = Field(
+        2_000_000, ge=1, description="decision cap: a run that reaches it before its trials ends `stalled`"
+    )
+    stall_decisions: int = Field(
+        100_000, ge=1, description="a run with this many no-go decisions in a row ends `stalled` (no progress)"
+    )
     prune_failure_map: bool = True
 
 
