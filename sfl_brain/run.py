@@ -8,10 +8,12 @@ children are stopped, the records closed, the recording merged and ``summary.jso
 
 from __future__ import annotations
 
+import copy
 import errno
 import json
 import logging
 import os
+import platform
 import shutil
 import signal
 import socket
@@ -32,6 +34,7 @@ from .rrlog import RerunLog
 from .runtime import RunError, Supervisor, kill_quietly
 from .scenario import Plan
 from .status import EXIT_CODES, EXIT_ENVIRONMENT, BadInput, EnvironmentProblem, RunStatus
+from .tables import write_tables
 
 log = logging.getLogger("sfl.run")
 
@@ -122,6 +125,73 @@ def prepare_run_dir(run_dir: Path) -> None:
         raise EnvironmentProblem(f"cannot write the run folder {run_dir}: {exc.strerror or exc}") from None
 
 
+def self_contained(plan: Plan, run_dir: Path) -> dict:
+    """The resolved scenario, made re-runnable from the run folder alone: a module given by file
+    (``impl: my_vig.py:Cls``) and an exploit protocol's maps are copied into ``inputs/`` and the
+    scenario points at the copies (``sfl run RUN_DIR/scenario.yaml`` runs the same run again)."""
+    resolved = copy.deepcopy(dict(plan.raw, seed=plan.scenario.seed))
+    inputs = run_dir / "inputs"
+    references = {}
+    for inst in plan.instances:
+        references[inst.spec_name] = inst.reference
+        if inst.colocated is not None:
+            references[inst.colocated.spec_name] = inst.colocated.reference
+    for name, spec in resolved.get("modules", {}).items():
+        target, _, class_name = references.get(name, "").rpartition(":")
+        if target.endswith(".py") and Path(target).is_file():
+            inputs.mkdir(exist_ok=True)
+            copied = inputs / Path(target).name
+            shutil.copyfile(target, copied)
+            spec["impl"] = f"inputs/{copied.name}:{class_name}"
+    protocol = resolved.get("protocol", {})
+    maps = getattr(plan.scenario.protocol, "maps", None)
+    if maps:
+        source = Path(maps) if Path(maps).is_absolute() or Path(maps).exists() else Path(plan.file).parent / maps
+        if source.is_file():
+            inputs.mkdir(exist_ok=True)
+            shutil.copyfile(source, inputs / source.name)
+            protocol["maps"] = f"inputs/{source.name}"
+    return resolved
+
+
+def provenance() -> dict:
+    """What produced a run: package versions, Python, the platform and the source commit."""
+    from importlib import metadata
+
+    versions = {}
+    for dist in ("sfl-brain", "numpy", "eclipse-zenoh", "rerun-sdk", "pymunk", "pybullet", "pydantic", "msgspec"):
+        try:
+            versions[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            continue
+    source = Path(__file__).resolve().parents[1]
+    commit, dirty = None, None
+    try:
+        head = subprocess.run(
+            ["git", "-C", str(source), "rev-parse", "HEAD"], capture_output=True, text=True, timeout=5
+        )
+        if head.returncode == 0:
+            commit = head.stdout.strip()
+            status = subprocess.run(
+                ["git", "-C", str(source), "status", "--porcelain", "--untracked-files=no"],
+                capture_output=True,
+                text=True,
+                timeout=5,
+            )
+            dirty = bool(status.stdout.strip())
+    except (OSError, subprocess.SubprocessError):
+        pass
+    return {
+        "versions": versions,
+        "python": sys.version.split()[0],
+        "platform": platform.platform(),
+        "cpus": os.cpu_count(),
+        "commit": commit,
+        "uncommitted_changes": dirty,
+        "source": str(source),
+    }
+
+
 def _counters(run_dir: Path, sup: Supervisor) -> dict:
     """Messages dropped during the run, by process and reason (malformed, unauthenticated, stale...)."""
     dropped: dict[str, dict] = {}
@@ -169,8 +239,8 @@ def run(
     if viewer:
         viewer_proc, viewer_url = start_viewer() if viewer is True else (None, viewer)
     run_id = uuid.uuid4().hex[:12]
-    resolved = dict(plan.raw, seed=plan.scenario.seed)
-    (run_dir / "scenario.yaml").write_text(yaml.safe_dump(resolved, sort_keys=False))
+    (run_dir / "scenario.yaml").write_text(yaml.safe_dump(self_contained(plan, run_dir), sort_keys=False))
+    (run_dir / "provenance.json").write_text(json.dumps(provenance(), indent=2) + "\n")
     (run_dir / "started").write_text(datetime.now().isoformat() + "\n")
     writer = RecordWriter(run_dir / "records.jsonl")
     sup = Supervisor(
@@ -235,6 +305,7 @@ def run(
                 writer.close,
                 rr_log.close,
                 lambda: merge_recordings(run_dir),
+                lambda: write_tables(run_dir, plan.raw.get("space", [])),
             ):
                 try:
                     step()

@@ -1,0 +1,69 @@
+"""Records a data user opens: typed Parquet tables, a documented schema, a run folder that runs again
+and says what produced it (issue 14, part 6)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pandas as pd
+import pyarrow.parquet as pq
+
+from sfl_brain.records import read_records
+from sfl_brain.tables import DECISION_COLUMNS, TRIAL_COLUMNS, columns_markdown
+
+from .conftest import ROOT, sfl
+
+CAUTIOUS = ROOT / "docs" / "examples" / "cautious.yaml"
+
+
+def stable(rows):
+    return [{k: v for k, v in r.items() if k not in ("wall_ms", "worker")} for r in rows]
+
+
+def test_tables_are_typed_and_hold_every_row(tmp_path):
+    out = tmp_path / "run"
+    done = sfl("run", str(CAUTIOUS), "--set", "protocol.trials=20", "--out", str(out), "--quiet")
+    assert done.returncode == 0, done.stderr
+    rows = read_records(out)
+    trials = pd.read_parquet(out / "trials.parquet")
+    decisions = pd.read_parquet(out / "decisions.parquet")
+    assert len(trials) == sum(r["kind"] == "trial" for r in rows) == 20
+    assert len(decisions) == sum(r["kind"] == "decision" for r in rows)
+    assert trials["success"].dtype == bool and decisions["go"].dtype == bool
+    assert trials["trial"].dtype == "int64" and trials["n_success"].dtype == "int64"
+    assert trials["trial"].tolist() == list(range(20))
+    # a no-go decision has no trial: null, not NaN-as-float in an int column
+    no_go = decisions[~decisions["go"]]
+    assert no_go["trial"].isna().all() and len(no_go) > 0
+    assert decisions["trial"].dtype == "float64" or str(decisions["trial"].dtype) in ("Int64", "int64")
+    # a failure has no reward
+    assert trials.loc[~trials["success"], "rho"].isna().all()
+    schema = pq.read_schema(out / "trials.parquet")
+    assert schema.field("wall_ms").metadata[b"unit"] == b"ms"
+    assert schema.field("x").metadata[b"meaning"] == b"body.x: physical value"
+    first = next(r for r in rows if r["kind"] == "trial")
+    assert trials.iloc[0]["quality"] == first["quality"] and list(trials.iloc[0]["v_unit"]) == first["v_unit"]
+
+
+def test_records_doc_lists_every_fixed_column():
+    text = (ROOT / "docs" / "records.md").read_text()
+    assert columns_markdown() in text
+    for col in (*DECISION_COLUMNS, *TRIAL_COLUMNS):
+        assert f"| `{col.name}` |" in text
+
+
+def test_run_folder_runs_again_on_its_own_and_says_what_made_it(tmp_path):
+    first = tmp_path / "first"
+    assert sfl("run", str(CAUTIOUS), "--set", "protocol.trials=15", "--out", str(first), "--quiet").returncode == 0
+    moved = tmp_path / "elsewhere" / "copy"
+    shutil.copytree(first, moved)  # the original scenario folder plays no part any more
+    again = tmp_path / "again"
+    done = sfl("run", str(moved / "scenario.yaml"), "--out", str(again), "--quiet", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert (moved / "inputs" / "cautious_vigilance.py").exists()
+    assert stable(read_records(again)) == stable(read_records(first))
+    made = json.loads((first / "provenance.json").read_text())
+    assert made["versions"]["sfl-brain"] and made["versions"]["eclipse-zenoh"]
+    assert made["python"].count(".") == 2
+    assert made["commit"] is None or len(made["commit"]) == 40
