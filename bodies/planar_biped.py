@@ -32,6 +32,7 @@ import math
 
 import numpy as np
 import pymunk
+import pymunk.batch
 from pydantic import Field
 
 from sfl_brain.body import Body, BodyParams
@@ -47,8 +48,50 @@ KNEE_LIMITS = (math.radians(-110), 0.0)
 _WALKER_STRIPS = ([0, 1], [1, 2, 3], [1, 4, 5])
 _WALKER_COLORS = np.array([(90, 90, 90), (40, 110, 220), (230, 140, 30)], dtype=np.uint8)
 
+_TORQUE = pymunk.batch.BodyFields.TORQUE
+
 SENSORS = ("hip_l", "hip_r", "knee_l", "knee_r", "contact_l", "contact_r", "slope", "pitch")
 COMMANDS = ("v_hip_l", "v_hip_r", "v_knee_l", "v_knee_r")
+
+
+#: steepest ground a slope or a terrain piece may have, degrees either way
+MAX_SLOPE_DEG = 45.0
+TERRAIN_SYNTAX = "pieces `length:slope_deg` separated by commas, e.g. '0.5:0,1.0:6,1.0:-4'"
+
+
+def _slope(value, where: str = "") -> float:
+    where = f"{where}: " if where else ""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ValueError(f"{where}expected a number of degrees; got {value!r}")
+    if not math.isfinite(value) or abs(value) > MAX_SLOPE_DEG:
+        raise ValueError(f"{where}expected a slope within +-{MAX_SLOPE_DEG:g} deg; got {value!r}")
+    return float(value)
+
+
+def parse_terrain(profile) -> list[tuple[float, float]]:
+    """(length m, slope deg) pieces of a terrain profile ``"0.5:0,1.0:6"`` ('' for none); ValueError if
+    malformed. Stricter than the body at run time: lengths in (0, 1000] m, slopes within MAX_SLOPE_DEG."""
+    if profile == "":
+        return []  # no profile: the constant slope_deg
+    if not isinstance(profile, str) or not profile.strip():
+        number = isinstance(profile, int | float) and not isinstance(profile, bool)
+        hint = " (for a constant slope use body.slope_deg)" if number else ""
+        raise ValueError(f"expected a terrain profile: {TERRAIN_SYNTAX}; got {profile!r}{hint}")
+    if not any(c.isdigit() for c in profile):
+        raise ValueError(f"expected a terrain profile: {TERRAIN_SYNTAX}; got {profile!r} (terrains have no names)")
+    pieces = []
+    for k, part in enumerate(profile.split(",")):
+        length, _, slope = part.partition(":")
+        try:
+            pieces.append((float(length), float(slope)))
+        except ValueError:
+            raise ValueError(
+                f"expected a terrain profile: {TERRAIN_SYNTAX}; piece {k} of {profile!r} is {part!r}"
+            ) from None
+        if not (math.isfinite(pieces[-1][0]) and 0 < pieces[-1][0] <= 1000):
+            raise ValueError(f"piece {k} of terrain {profile!r}: expected a length in (0, 1000] m; got {length!r}")
+        _slope(pieces[-1][1], f"piece {k} of terrain {profile!r}")
+    return pieces
 
 
 class PlanarBipedParams(BodyParams):
@@ -105,6 +148,7 @@ class PlanarBiped(Body):
             (self.legs[0][0], self.legs[0][1]),
             (self.legs[1][0], self.legs[1][1]),
         ]
+        self._batch_buffers()
         self.t = 0.0
         self.x_start = self.trunk.position.x
         self.energy = 0.0
@@ -117,6 +161,15 @@ class PlanarBiped(Body):
         self._trace: list[np.ndarray] = [] if self.logging else None
         self.trial_id = request.trial_id
         self._update_contacts()
+
+    @classmethod
+    def check_trial_param(cls, name: str, value) -> None:
+        """Raise ValueError if ``value`` cannot be trial parameter ``name`` (``sfl check`` calls
+        this for conditions and axis bounds, so a bad terrain fails before the run starts)."""
+        if name == "terrain":
+            parse_terrain(value)
+        elif name == "slope_deg":
+            _slope(value)
 
     def _terrain(self, body_params: dict) -> list[tuple[float, float]]:
         profile = body_params.get("terrain")
@@ -152,6 +205,34 @@ class PlanarBiped(Body):
             seg = pymunk.Segment(self.space.static_body, (xs[i], ys[i]), (xs[i + 1], ys[i + 1]), GROUND_R)
             seg.friction = self.params.friction
             self.space.add(seg)
+
+    def _batch_buffers(self) -> None:
+        """Buffers for pymunk's batch API: the joint torques go to every body in one call per physics
+        step, and the state comes back in one call per tick (property by property, these reads and
+        writes were most of a trial's time). Rows follow the space's own body order."""
+        ids = pymunk.batch.Buffer()
+        pymunk.batch.get_space_bodies(self.space, pymunk.batch.BodyFields.BODY_ID, ids)
+        order = {int(i): k for k, i in enumerate(np.frombuffer(ids.int_buf(), dtype=np.uintp))}
+        (tl, sl), (tr, sr) = self.legs
+        # rows of trunk, thigh_l, shank_l, thigh_r, shank_r in the batch buffers
+        self._rows = np.array([order[b.id] for b in (self.trunk, tl, sl, tr, sr)])
+        self._torques = np.zeros(len(order))
+        self._torque_buffer = pymunk.batch.Buffer()
+        self._torque_buffer.set_float_buf(self._torques)
+        self._state_buffer = pymunk.batch.Buffer()
+        self._read_state()
+
+    #: per body: x, y (m), angle (rad), angular velocity (rad/s), in the batch API's order
+    _STATE_FIELDS = (
+        pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.ANGLE | pymunk.batch.BodyFields.ANGULAR_VELOCITY
+    )
+
+    def _read_state(self) -> None:
+        """x, y, angle, angular velocity of trunk, thigh_l, shank_l, thigh_r, shank_r (rows), one call."""
+        buffer = self._state_buffer
+        buffer.clear()
+        pymunk.batch.get_space_bodies(self.space, self._STATE_FIELDS, buffer)
+        self._state = np.frombuffer(buffer.float_buf()).reshape(-1, 4)[self._rows]
 
     def ground_height(self, x: float) -> float:
         return float(np.interp(x, self.ground_x, self.ground_y))
@@ -203,10 +284,15 @@ class PlanarBiped(Body):
         return shank.local_to_world((0, -SHANK / 2))
 
     def _update_contacts(self) -> None:
+        feet = [self._foot(0), self._foot(1)]
+        xs = [feet[0].x, feet[1].x, self._state[0, 0]]  # both feet and the trunk (for sense())
+        grounds = np.interp(xs[:2], self.ground_x, self.ground_y)
+        slopes = self.ground_slopes[np.clip(np.searchsorted(self.ground_x, xs) - 1, 0, len(self.ground_slopes) - 1)]
+        self._slope_under_trunk = float(slopes[2])
         for i in range(2):
-            foot = self._foot(i)
-            slope = self.ground_slope(foot.x)
-            clearance = (foot.y - self.ground_height(foot.x)) * math.cos(slope) - FOOT_R - GROUND_R
+            foot = feet[i]
+            slope = float(slopes[i])
+            clearance = (foot.y - float(grounds[i])) * math.cos(slope) - FOOT_R - GROUND_R
             on = clearance < (0.004 if self.contact[i] else 0.002)  # hysteresis
             if on and not self.contact[i] and i != self._last_foot:
                 self.steps += 1  # a step: the other foot touches down
@@ -214,19 +300,18 @@ class PlanarBiped(Body):
             self.contact[i] = 1.0 if on else 0.0
 
     def sense(self) -> np.ndarray:
-        trunk = self.trunk
-        (tl, sl), (tr, sr) = self.legs
+        trunk, thigh_l, shank_l, thigh_r, shank_r = self._state[:, 2].tolist()  # angles, rad
         half_pi = math.pi / 2
         return np.array(
             [
-                half_pi + tl.angle - trunk.angle,
-                half_pi + tr.angle - trunk.angle,
-                sl.angle - tl.angle,
-                sr.angle - tr.angle,
+                half_pi + thigh_l - trunk,
+                half_pi + thigh_r - trunk,
+                shank_l - thigh_l,
+                shank_r - thigh_r,
                 self.contact[0],
                 self.contact[1],
-                self.ground_slope(trunk.position.x),
-                trunk.angle,
+                self._slope_under_trunk,
+                trunk,
             ]
         )
 
@@ -234,23 +319,25 @@ class PlanarBiped(Body):
     def actuate(self, command: np.ndarray) -> None:
         p = self.params
         voltage = np.clip(np.asarray(command, dtype=float), -12.0, 12.0)
-        torque_per_volt = p.motor_gain
         h = p.control_dt / p.substeps
-        joints = self.joints
+        # tau = K V on each joint, + on its child link and - on its parent (the -K k_e omega part is
+        # the damper added at build time); the sums in the order a link's joints add them
+        hip_l, hip_r, knee_l, knee_r = (p.motor_gain * voltage).tolist()
+        torques, rows = self._torques, self._rows
+        torques[rows] = (0.0 - hip_l - hip_r, 0.0 + hip_l - knee_l, 0.0 + knee_l, 0.0 + hip_r - knee_r, 0.0 + knee_r)
+        space, buffer, set_bodies, fields = self.space, self._torque_buffer, pymunk.batch.set_space_bodies, _TORQUE
         for _ in range(p.substeps):
-            # tau = K V; the -K k_e omega part is the damper added at build time
-            for (parent, child), v in zip(joints, voltage, strict=True):
-                tau = torque_per_volt * v
-                child.torque += tau
-                parent.torque -= tau
-            self.space.step(h)
-        omega = np.array([c.angular_velocity - a.angular_velocity for a, c in joints])
+            set_bodies(space, fields, buffer)  # pymunk zeroes every torque after a step
+            space.step(h)
+        self._read_state()
+        spin = self._state[:, 3]  # trunk, thigh_l, shank_l, thigh_r, shank_r, rad/s
+        omega = spin[[1, 3, 2, 4]] - spin[[0, 0, 1, 3]]  # child - parent, joints as COMMANDS
         current = (voltage - p.back_emf * omega) / p.resistance
         self.energy += float(np.sum(p.resistance * current**2)) * p.control_dt  # (5.5)-(5.6)
         self.t += p.control_dt
         self._update_contacts()
-        trunk_y = self.trunk.position.y
-        if trunk_y < self.legs[0][1].position.y or trunk_y < self.legs[1][1].position.y:
+        trunk_y, shank_l_y, shank_r_y = self._state[[0, 2, 4], 1].tolist()
+        if trunk_y < shank_l_y or trunk_y < shank_r_y:
             self.fell = True  # trunk centre of mass below a shank's (§3.4.3)
         if self._frames is not None:
             self._record_frame(voltage)
