@@ -42,6 +42,7 @@ def test_bus_benchmark_prints_the_framework_against_raw_zenoh():
 def test_planar_benchmark_prints_the_trial_ratios_and_the_sweep_speed_ups():
     out = bench("planar.py", "--repeats", "1", "--grid", "2")
     figures(out, r"\(c\)/\(b\) = ([\d.]+)")
+    figures(out, r"\(b0\)/\(b\) = ([\d.]+)")  # the body before batching, measured beside it
     figures(out, r"speed-up ([\d.]+)x", count=2)
 
 
