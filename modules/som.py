@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from sfl_brain.module import ModuleParams
 
@@ -33,6 +33,37 @@ class SOMParams(ModuleParams):
         description="'gaussian': exp(-|r-s|^2 / 2 sigma^2); 'thesis': exp(-|r-s| / 2 sigma^2) "
         "as printed in (2.11), so wide that a map stays contracted for hundreds of samples",
     )
+
+    @model_validator(mode="after")
+    def _fits_in_memory(self):
+        size = int(np.prod(self.shape, dtype=object))
+        if size > MAX_NEURONS:
+            raise ValueError(
+                f"expected at most {MAX_NEURONS} neurons (e.g. 64 x 64 or 16 x 16 x 16); shape "
+                f"{list(self.shape)} has {size}, and its success and failure maps would need about "
+                f"{_bytes(map_memory(self.shape))} of memory for their grid distances"
+            )
+        return self
+
+
+#: neurons per map at most: a map keeps the grid distance between every pair of its neurons
+#: (neurons^2 float64), so 4096 neurons take about 1 GB while a pair of 2-D maps is built
+MAX_NEURONS = 4096
+
+
+def map_memory(shape) -> int:
+    """Bytes at the peak of building a success and a failure map of ``shape``: the first map's
+    neurons^2 distance table plus the second's, with its per-axis differences and squares."""
+    size = int(np.prod(shape, dtype=object))
+    return size * size * 8 * (3 + 2 * len(shape))
+
+
+def _bytes(n: int) -> str:
+    for unit in ("B", "kB", "MB", "GB", "TB", "PB"):
+        if n < 1000:
+            return f"{n:.3g} {unit}"
+        n /= 1000
+    return f"{n:.3g} EB"
 
 
 class SelfOrganisingMap:

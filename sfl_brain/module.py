@@ -5,6 +5,10 @@ and handler methods marked with :func:`on`, each taking one message type and
 returning the reply. Nothing here knows about Zenoh or processes; the runtime
 (:mod:`sfl_brain.host`) hosts a module in a process and routes messages to it.
 
+:meth:`Module.handle` refuses NaN and infinities in what a module receives and in the reply it
+gives (:class:`~sfl_brain.messages.NonFiniteError`, naming the module, the message and the field),
+so a non-finite value stops the run where it appears, in one process or over the bus.
+
 A complete module::
 
     class Echo(Module):
@@ -27,13 +31,13 @@ from typing import Any, ClassVar
 import numpy as np
 from pydantic import BaseModel, ConfigDict
 
-from .messages import Message
+from .messages import CHECKED, Message, check_finite
 
 
 class ModuleParams(BaseModel):
     """Base of parameter schemas: frozen, keyword-only, unknown keys rejected."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
 
 def on(message_type: type[Message]) -> Callable:
@@ -96,13 +100,25 @@ class Module:
             work()
 
     def handle(self, msg: Message) -> Message | None:
-        """Dispatch a message to its handler by type."""
+        """Dispatch a message to its handler by type.
+
+        Raises :class:`~sfl_brain.messages.NonFiniteError` when ``msg`` or the reply holds NaN or
+        an infinity. A message the codec has just decoded was checked there and is not checked
+        again; a stream reply (a controller's command) is checked where it lands, by the body's
+        decoder or its in-process link, so that a controller in another process still sends it
+        and the body stops the trial at once instead of waiting for a command that never comes.
+        """
         if self._deferred:
             self.run_deferred()
         handler = self._handlers.get(type(msg))
         if handler is None:
             raise TypeError(f"{type(self).__name__} does not handle {msg.TAG!r}")
-        return handler(msg)
+        if msg is not CHECKED[0]:
+            check_finite(msg, self, "received")
+        reply = handler(msg)
+        if reply is not None and not reply.STREAM:
+            check_finite(reply, self, "replied")
+        return reply
 
     def close(self) -> None:
         """Release resources (physics spaces, files). Called once by the host at exit."""

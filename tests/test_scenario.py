@@ -64,7 +64,7 @@ def test_unknown_implementation_suggests_registered_name(write_scenario):
 def test_out_of_range_and_wrong_type(write_scenario):
     text, _ = errors(write_scenario, BASE.replace("trials: 5", "trials: 0").replace("seed: 1", "seed: abc"))
     assert "protocol.trials: input should be greater than or equal to 1; got 0" in text
-    assert "seed: input should be a valid integer" in text
+    assert "seed: expected an integer; got 'abc'" in text  # was "input should be a valid integer"
 
 
 def test_missing_module_is_a_wiring_error(write_scenario):
@@ -127,3 +127,60 @@ def test_lockstep_processes_get_a_core_each_only_when_there_are_enough():
     assert assign(pair, [2, 5, 7], "never") == {}
     assert assign(two, [0, 1], "always") == {}  # four lockstep processes on two cores
     assert assign(["body"], [3], "always") == {}  # one core: nothing to separate
+
+
+def test_strict_types_keep_what_is_right(write_scenario):
+    """Strict mode refuses "40" and true for numbers, but an integer is a fine float, enum and
+    literal names still read, and anchors, merge keys and dates work as YAML says."""
+    text = BASE.replace("low: 0, high: 1}", "low: 0, high: 2}") + textwrap.dedent(
+        """
+        description: 2024-01-01
+        lockstep: {pin_cpus: auto, spin_us: 0}
+        timeouts: &t {ready: 5, request: 3}
+        record: {body_every: 0, decisions: false}
+        """
+    )
+    plan = load(write_scenario(textwrap.dedent(text)))
+    s = plan.scenario
+    assert s.space[0].high == 2.0 and isinstance(s.space[0].high, float)
+    assert s.lockstep.pin_cpus == "auto" and s.timeouts.ready == 5.0
+    assert s.description == "2024-01-01"  # dates stay text
+    merged = BASE.replace(
+        "protocol: {kind: learn, trials: 5}", "base: &p {kind: learn, trials: 5}\nprotocol: {<<: *p, trials: 7}"
+    )
+    with pytest.raises(ScenarioError, match="base: unknown key"):  # anchors and merges parse; the key is unknown
+        load(write_scenario(merged))
+
+
+def test_restart_on_failure_is_accepted_for_bodies_and_controllers_only(write_scenario):
+    quick = SCENARIOS / "quickstart.yaml"
+    plan = load(quick, ["modules.body.restart=on-failure", "modules.controller.restart=on-failure"])
+    assert {i.spec_name: i.restart for i in plan.instances} == {
+        "acc": "never",
+        "vigilance": "never",
+        "ofc": "never",
+        "controller": "on-failure",
+        "body": "on-failure",
+    }
+    for brain in ("acc", "vigilance", "ofc"):
+        with pytest.raises(ScenarioError) as info:
+            load(quick, [f"modules.{brain}.restart=on-failure"])
+        assert f"modules.{brain}.restart: expected 'never' for " in str(info.value)
+
+
+def test_terrains_and_map_shapes_that_fit_pass_check():
+    plan = load(SCENARIOS / "e3_5_fixed.yaml", ['conditions.body.terrain="1:0,2.5:-12.5,1:45"'])
+    assert plan.scenario.conditions["body.terrain"] == "1:0,2.5:-12.5,1:45"
+    assert load(SCENARIOS / "analytic_learn.yaml", ["modules.acc.params.shape=[64, 64]"])
+    assert load(SCENARIOS / "analytic_learn.yaml", ["modules.acc.params.shape=[16, 16, 16]"])
+
+
+def test_module_params_stay_lists_through_json_for_the_host():
+    """The host re-validates params from JSON (``model_dump(mode='json')``): tuples arrive as lists."""
+    from sfl_brain.registry import resolve
+
+    plan = load(SCENARIOS / "quickstart.yaml", ["modules.acc.params.shape=[5, 6]"])
+    acc = next(i for i in plan.instances if i.name == "acc")
+    assert acc.params["shape"] == [5, 6]
+    cls, _ = resolve(acc.reference)
+    assert cls.Params.model_validate(acc.params).shape == (5, 6)

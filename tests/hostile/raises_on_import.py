@@ -1,0 +1,3 @@
+"""A user module whose import fails (for tests/hostile/impl_raises.yaml)."""
+
+raise RuntimeError("boom on import")
