@@ -7,17 +7,37 @@ commands. :meth:`Body.trial` runs them in lockstep through a *link*: the
 controller itself in the same process (:class:`InProcessLink`), or the same
 controller in another process over Zenoh (``sfl_brain.host.BusLink``). The loop
 is the same either way, so both give identical trial records.
+
+NaN or an infinity in a tick's sensor values, in a controller's command or in a
+trial's outcome ends the trial with :class:`~sfl_brain.messages.NonFiniteError`,
+naming the body or controller, the message and the value (``values[3] (knee_r)``);
+the trial request then gets an error reply and the run stops ``failed``.
 """
 
 from __future__ import annotations
 
+import math
 import time
-from typing import ClassVar, Protocol
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
 from pydantic import Field
 
-from .messages import _F8, Ack, ControllerReset, MotorCommand, SensorFrame, TrialRequest, TrialResult
+from .messages import (
+    _F8,
+    CHECKED,
+    Ack,
+    ControllerReset,
+    Message,
+    MotorCommand,
+    NonFiniteError,
+    SensorFrame,
+    TrialRequest,
+    TrialResult,
+    check_finite,
+    first_nonfinite,
+    message_name,
+)
 from .module import Module, ModuleParams, on
 
 
@@ -39,7 +59,21 @@ class InProcessLink:
         self.controller.handle(msg)
 
     def step(self, frame: SensorFrame) -> MotorCommand:
-        return self.controller.handle(frame)
+        command = self.controller.handle(frame)
+        # a command is checked where it lands (see Module.handle): one sum for a short vector
+        if not _finite_vector(getattr(command, "values", None)) and isinstance(command, Message):
+            check_finite(command, self.controller, "replied")
+        return command
+
+
+def _finite_vector(values: Any) -> bool:
+    """True when ``values`` is a vector whose plain sum is finite, which proves every value finite
+    (NaN and infinities propagate through a sum; see ``messages.all_finite``). False says only
+    that the exact check must decide (an overflowing sum, not a vector)."""
+    try:
+        return math.isfinite(sum(values.tolist()))
+    except (AttributeError, TypeError):
+        return False
 
 
 class BodyParams(ModuleParams):
@@ -91,6 +125,28 @@ class Body(Module):
         """Send what was buffered during the trial to ``self.recording`` (optional)."""
 
     # --- the loop ------------------------------------------------------------
+    def _check_sensors(self, values: Any, trial_id: int, tick: int) -> None:
+        """Raise NonFiniteError naming this body and the sensor of the first NaN or infinity."""
+        bad = first_nonfinite(values)
+        if bad is None:
+            return  # all finite (the quick sum overflowed)
+        where, value = bad
+        i = where[1:-1]
+        if i.isdigit() and int(i) < len(self.SENSORS):
+            where += f" ({self.SENSORS[int(i)]})"
+        raise NonFiniteError(
+            message_name(SensorFrame), "values" + where, value, self, "sensed", {"trial_id": trial_id, "tick": tick}
+        )
+
+    def _controller_name(self) -> str:
+        """How errors name the controller behind ``self.link``."""
+        controller = getattr(self.link, "controller", None)
+        if isinstance(controller, str):  # a BusLink: the controller's instance name
+            return f"controller {controller!r}"
+        if controller is not None:
+            return f"{type(controller).__name__} {controller.entity!r}"
+        return "the controller"
+
     @on(TrialRequest)
     def trial(self, request: TrialRequest) -> TrialResult:
         """Run one trial in lockstep with the controller behind ``self.link``."""
@@ -114,9 +170,18 @@ class Body(Module):
             tick = 0
             step_wall = time.perf_counter()
             dt = self.params.control_dt
+            step = self.link.step
             while not self.done:
-                frame = SensorFrame(trial_id=request.trial_id, tick=tick, values=self.sense())
-                command = self.link.step(frame)
+                values = self.sense()
+                if not _finite_vector(values):
+                    self._check_sensors(values, request.trial_id, tick)
+                frame = CHECKED[0] = SensorFrame(trial_id=request.trial_id, tick=tick, values=values)
+                try:
+                    command = step(frame)
+                except NonFiniteError as exc:
+                    if exc.module is None:  # decoded from a controller in another process
+                        raise exc.named(self._controller_name(), "sent") from None
+                    raise
                 if command.trial_id != request.trial_id or command.tick != tick:
                     raise RuntimeError(
                         f"controller answered trial {command.trial_id} tick {command.tick}, "

@@ -14,11 +14,16 @@ int64/float64 and the vector's raw bytes. ``decode`` reads both layouts.
 
 ``decode`` raises :class:`MessageError` for anything it cannot turn back into a
 registered message of the right schema version and field types; the runtime logs
-and drops such input, it never crashes on it.
+and drops such input, it never crashes on it. A well-formed message with NaN or an
+infinity in any field (a float, an array, a value in a dict or list) raises
+:class:`NonFiniteError` instead: that is an error of its sender, which stops what it
+belongs to. A field with no value holds None. ``Module.handle`` applies the same check
+(:func:`check_finite`) to what a module receives and replies without the codec.
 """
 
 from __future__ import annotations
 
+import math
 import struct
 import types
 import typing
@@ -35,6 +40,51 @@ _REGISTRY: dict[str, type[Message]] = {}
 
 class MessageError(ValueError):
     """A payload that is not a well-formed message of this schema."""
+
+
+class NonFiniteError(ValueError):
+    """A message field holds NaN or an infinity (a field with no value holds None).
+
+    ``message`` names the message (``vigilance.threshold (Threshold)``), ``field`` the field and,
+    inside an array, dict or list, where the first bad value sits (``values[3]``,
+    ``metrics['energy']``); ``value`` is that value. ``module`` names the module that received or
+    sent it (``CautiousVigilance 'vigilance'``) and ``role`` what it did (``replied``,
+    ``received``, ``sensed``, ``sent``), or both are None when only the codec saw it.
+    ``header`` holds the message's scalar fields when they are known (a packed message's
+    ``trial_id`` and ``tick``), so a link can tell whether the message was meant for it.
+
+    Not a :class:`MessageError`: a malformed payload may be noise and is dropped, but a
+    well-formed message with a non-finite value is an error of its sender.
+    """
+
+    def __init__(
+        self,
+        message: str,
+        field: str,
+        value: Any,
+        module: Any = None,
+        role: str | None = None,
+        header: dict | None = None,
+    ) -> None:
+        if module is not None and not isinstance(module, str):  # a Module: its class and instance name
+            module = f"{type(module).__name__} {module.entity!r}"
+        if isinstance(value, np.generic):
+            value = value.item()  # nan, not np.float64(nan), in the text
+        self.message = message
+        self.field = field
+        self.value = value
+        self.module = module
+        self.role = role
+        self.header = header or {}
+        who = f"{module} {role or 'handled'} " if module else ""
+        super().__init__(f"{who}{message}: {field} = {value!r}, not a finite number")
+
+    def __reduce__(self):
+        return NonFiniteError, (self.message, self.field, self.value, self.module, self.role, self.header)
+
+    def named(self, module: Any, role: str) -> NonFiniteError:
+        """The same error, said of ``module`` that ``role`` (received, replied, sent) the message."""
+        return NonFiniteError(self.message, self.field, self.value, module, role, self.header)
 
 
 class Message(msgspec.Struct, frozen=True, array_like=True):
@@ -88,6 +138,111 @@ def _checker(annotation: Any):
     return None
 
 
+# --- finiteness --------------------------------------------------------------------
+_isfinite = math.isfinite
+_SHORT = 32  # up to this many values, sum(v.tolist()) is the cheapest test of a float64 vector
+#: the message a decoder or a body checked last: ``Module.handle`` does not check it again (any
+#: other thread may overwrite it, which only costs a second check; it never skips one)
+CHECKED: list[Message | None] = [None]
+
+
+def all_finite(v: np.ndarray) -> bool:
+    """True when the array holds no NaN or infinity.
+
+    A short 1-D float vector (a control tick's) takes one Python sum: NaN and infinities
+    propagate through it, so a finite sum proves every value finite; only a sum that overflowed
+    takes the exact test.
+    """
+    kind = v.dtype.kind
+    if kind == "f" or kind == "c":
+        if kind == "f" and v.ndim == 1 and v.size <= _SHORT and _isfinite(sum(v.tolist())):
+            return True
+        return bool(np.isfinite(v).all())
+    if kind == "O":
+        return all(first_nonfinite(x) is None for x in v.flat)
+    return True  # integers, booleans, strings: finite by construction
+
+
+def _array_index(v: np.ndarray) -> tuple[str, Any]:
+    """``[i, j]`` and the value of the first non-finite entry of ``v`` (which has one)."""
+    flat = v.reshape(-1)
+    if v.dtype.kind == "O":
+        i = next(i for i, x in enumerate(flat) if first_nonfinite(x) is not None)
+    else:
+        i = int(np.flatnonzero(~np.isfinite(flat))[0])
+    if v.ndim == 0:
+        return "", flat[0]
+    return "[" + ", ".join(str(int(j)) for j in np.unravel_index(i, v.shape)) + "]", flat[i]
+
+
+def _first_in(items) -> tuple[str, Any] | None:
+    """The first non-finite value among (index or key, value) pairs, as ``[index]...``."""
+    for key, item in items:
+        c = item.__class__
+        if c is float:
+            if _isfinite(item):
+                continue
+            return f"[{key!r}]", item
+        if c is str or c is int or c is bool or item is None:
+            continue
+        bad = first_nonfinite(item)
+        if bad is not None:
+            return f"[{key!r}]{bad[0]}", bad[1]
+    return None
+
+
+def first_nonfinite(value: Any) -> tuple[str, Any] | None:
+    """Where the first NaN or infinity in ``value`` sits and that value, or None.
+
+    Where is ``""`` for the value itself, else its indices and keys (``[3]``, ``['energy'][1]``,
+    ``[2, 0]`` in a 2-D array; `` (a key)`` for a dict key). Looks into arrays, dicts, lists and
+    tuples.
+    """
+    cls = value.__class__
+    if cls is float:
+        return None if _isfinite(value) else ("", value)
+    if cls is int or cls is bool or cls is str or value is None:
+        return None
+    if isinstance(value, np.ndarray):
+        return None if all_finite(value) else _array_index(value)
+    if isinstance(value, dict):
+        for key in value:
+            if key.__class__ is not str and first_nonfinite(key) is not None:
+                return " (a key)", key
+        return _first_in(value.items())
+    if isinstance(value, list | tuple):
+        return _first_in(enumerate(value))
+    if isinstance(value, float | np.floating | complex | np.complexfloating):
+        return None if np.isfinite(value) else ("", value)
+    return None
+
+
+def message_name(cls: type[Message]) -> str:
+    """``tag (Class)``: how errors name a message."""
+    return f"{cls.TAG} ({cls.__name__})"
+
+
+def check_finite(msg: Message, module: Any = None, role: str | None = None) -> None:
+    """Raise :class:`NonFiniteError` for the first field of ``msg`` that holds NaN or an infinity;
+    ``module`` (a name, or a Module) and ``role`` say who had it and what it did."""
+    for name in msg._FIELDS:
+        bad = first_nonfinite(getattr(msg, name))
+        if bad is not None:
+            header = {n: getattr(msg, n) for n in msg._FIELDS if type(getattr(msg, n)) is int}
+            raise NonFiniteError(message_name(type(msg)), name + bad[0], bad[1], module, role, header)
+
+
+def _packed_nonfinite(cls: type[Message], names: tuple[str, ...], scalars: tuple, vector: np.ndarray):
+    """The error for a packed message with a non-finite scalar or vector value."""
+    *heads, last = names
+    header = dict(zip(heads, scalars, strict=True))
+    bad = next(((n, x) for n, x in header.items() if not _isfinite(x)), None)
+    if bad is None:
+        where, value = _array_index(vector)
+        bad = last + where, value
+    return NonFiniteError(message_name(cls), *bad, header={n: x for n, x in header.items() if type(x) is int})
+
+
 _PACKED_MARK = 0xC1
 _F8 = np.dtype("<f8")
 #: the decoders of packed messages by their prefix (mark, schema version, tag length, tag)
@@ -133,8 +288,12 @@ def _packed_layout(cls, names: tuple[str, ...], hints: dict) -> Packed:
         ],
         dict(namespace),
     )
-    # the field types need no check: unpacking the scalars and viewing the vector make them
-    fields = [f"{n}=s[{i}]" for i, n in enumerate(scalars)] + [f"{vector}=frombuffer(data, F8, n >> 3, {start})"]
+    # the field types need no check: unpacking the scalars and viewing the vector make them; the
+    # values' finiteness does (one sum for a short vector, see all_finite)
+    floats = [f"isfinite(s[{i}])" for i, n in enumerate(scalars) if hints[n] is float]
+    fields = [f"{n}=s[{i}]" for i, n in enumerate(scalars)] + [f"{vector}=v"]
+    namespace |= {"isfinite": _isfinite, "all_finite": all_finite, "checked": CHECKED}
+    namespace |= {"nonfinite": _packed_nonfinite, "names": names}
     decoder = _compile(
         [
             "def f(data):",
@@ -142,7 +301,13 @@ def _packed_layout(cls, names: tuple[str, ...], hints: dict) -> Packed:
             "    if n < 0 or n & 7:",
             "        return None",
             f"    s = unpack(data, {len(prefix)})",
-            f"    return cls({', '.join(fields)})",
+            f"    v = frombuffer(data, F8, n >> 3, {start})",
+            f"    if not (n <= {8 * _SHORT} and isfinite(sum(v.tolist())) or all_finite(v))"
+            + "".join(f" or not {c}" for c in floats)
+            + ":",
+            "        raise nonfinite(cls, names, s, v)",
+            f"    m = checked[0] = cls({', '.join(fields)})",
+            "    return m",
         ],
         dict(namespace),
     )
@@ -262,7 +427,8 @@ def _packed_error(data: bytes) -> MessageError:
 
 
 def decode(data: bytes) -> Message:
-    """Turn bytes back into a message, or raise :class:`MessageError` saying why not."""
+    """Turn bytes back into a message, or raise :class:`MessageError` saying why not, or
+    :class:`NonFiniteError` naming the message and the field that holds NaN or an infinity."""
     if data[:1] == b"\xc1":
         decoder = _PACKED_DECODERS.get(data[: 3 + data[2]]) if len(data) > 2 else None
         msg = decoder(data) if decoder is not None else None
@@ -289,7 +455,10 @@ def decode(data: bytes) -> Message:
         value = values[i]
         if not isinstance(value, check) or (value is True or value is False) and bool not in check:
             raise MessageError(f"{tag}.{name}: expected {check}, got {type(value).__name__}")
-    return cls(**dict(zip(cls._FIELDS, values, strict=True)))
+    msg = cls(**dict(zip(cls._FIELDS, values, strict=True)))
+    check_finite(msg)
+    CHECKED[0] = msg
+    return msg
 
 
 def decoder_for(cls: type[Message]):

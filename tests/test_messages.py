@@ -48,7 +48,7 @@ def test_malformed_payloads_raise_message_error(payload, text):
 
 
 def test_packed_stream_messages_roundtrip_and_fall_back_for_other_arrays():
-    frame = m.SensorFrame(trial_id=3, tick=-7, values=np.array([0.5, -1.0, np.inf]))
+    frame = m.SensorFrame(trial_id=3, tick=-7, values=np.array([0.5, -1.0, 5e-324]))  # a subnormal: still exact
     data = m.encode(frame)
     assert data[0] == 0xC1 and len(data) == 3 + len("controller.sensors") + 16 + 24
     back = m.decode(data)
