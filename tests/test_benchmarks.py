@@ -49,3 +49,8 @@ def test_planar_benchmark_prints_the_trial_ratios_and_the_sweep_speed_ups():
 def test_brain_benchmark_prints_the_cycle_per_trial():
     out = bench("brain.py")
     figures(out, r"([\d.]+) ms/trial", count=2)
+
+
+def test_cpg_benchmark_prints_the_cost_per_tick_beside_the_physics():
+    out = bench("cpg.py", "--ticks", "200")
+    figures(out, r"median +([\d.]+) us", count=3)  # planar circuit, humanoid circuit, physics stand-in

@@ -1,0 +1,362 @@
+"""MLMP-CPG circuits as data: a YAML file lists the joints, their synaptic tables, the RG-RG couplings,
+the sensory neurons and the joint command; this module validates it.
+
+A circuit file is checked like a scenario: frozen models, unknown keys rejected, strict types (a
+string is not a number), finite numbers, and every name it refers to (sensory neuron, input, joint,
+``joint.E``/``joint.F`` neuron) must exist. Problems are reported as
+``FILE: key.path: expected ..., got ... (did you mean ...?)`` with ``sfl_brain.scenario.Problem``.
+
+Layout of a file (see ``circuits/*.yaml``; CPG-HUMANOID.md is "the digest" below)::
+
+    name: ...
+    command: voltage | position        # (3.6) V = M (G_E U_E + G_F U_F) with G_E = 1, G_F = -1,
+                                       # or theta_0 + G (MN_E - MN_F) (digest §5, §7.8)
+    cell: {tau_m, tau_s, A_f, E_s}     # the Rowat-Selverston constants, (4.1)-(4.8)
+    motor_neuron: {alpha, theta}       # (4.11): 5 and 0.5, L1127
+    inputs: [names of the raw sensor values, in the order of the array given to advance()]
+    sensory_neurons: [{name, input, alpha, theta}]       # (4.13)
+    joints:
+      - name: hip_l
+        rg: {sigma_s, sigma_f}          # (4.4)-(4.7); optional sigma_in/sigma_out for (4.8)
+        pf: {alpha, theta, alpha_mlr, theta_mlr}          # (4.9)
+        rg_mutual: -1                   # Table 4.1: RG-E -> RG-F and RG-F -> RG-E
+        synapses: {ES: {MN_E: -0.4}}    # sensory neuron -> {PF_E, PF_F, MN_E, MN_F: weight}
+        gain: 1.0                       # M of (3.6) or G of the position command
+        theta0: 0.0                     # position command offset, rad
+        angle_input: hip_l              # the input holding this joint's angle (pattern switching)
+    couplings: [{source: hip_l.E, target: hip_r.F, weight: 1.0}]   # RG -> RG, through tanh(V/A_f)
+    kicks: [{joints: [hip_l], start: 0.0, duration: 0.08, amplitude: 1.0}]
+    phase_resets: [{sensor: GB_l, joint: hip_l, amplitude: -1.0, duration: 0.04, enabled: true}]
+    switches: [{joints: {knee_l: {sigma_s: .., sigma_f: ..}}, at: 2.0}]   # or input: ..., above: ...
+
+Current pulses (kicks, phase resets, switch kicks) follow the author's code sign convention (digest
+§5): ``amplitude`` is the current injected into the flexor RG, the extensor RG receives its negative.
+"""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from sfl_brain.registry import nearest
+from sfl_brain.scenario import Problem, ScenarioError, problems_from
+
+CIRCUITS = Path(__file__).resolve().parent / "circuits"
+
+Number = Annotated[float, Field(strict=True, allow_inf_nan=False)]
+NonNegative = Annotated[float, Field(strict=True, allow_inf_nan=False, ge=0)]
+Positive = Annotated[float, Field(strict=True, allow_inf_nan=False, gt=0)]
+Name = Annotated[str, Field(strict=True, min_length=1, pattern=r"^[A-Za-z][A-Za-z0-9_]*$")]
+Target = Literal["PF_E", "PF_F", "MN_E", "MN_F"]
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=True)
+
+
+class Cell(Strict):
+    """Constants of every rhythm generator cell, (4.1)-(4.8). Times in s, potentials in the model's mV."""
+
+    tau_m: Positive = 0.05  # membrane time constant, s: L1617 ("tau_m = 0.05 ... for all rhythmic neurons")
+    tau_s: Positive = 1.0  # slow current time constant, s: L1617
+    A_f: Positive = 5.0  # amplitude of the fast current's N-shape (4.4): not in the thesis; author's code (digest §5)
+    E_s: Number = 0.0  # reversal potential of the slow current (4.6): not in the thesis; author's code (digest §5)
+
+
+class MotorNeuronConstants(Strict):
+    alpha: Number = 5.0  # slope of (4.11), "fixed empirically to 5", L1127
+    theta: Number = 0.5  # threshold of (4.11), "fixed empirically to ... 0.5", L1127
+
+
+class RhythmGenerator(Strict):
+    """The two shape parameters of the RG cell of a joint (both its E and F cells)."""
+
+    sigma_s: NonNegative  # g_K / g_L (4.7); thesis range [0, 5] (Table 4.1)
+    sigma_f: NonNegative  # g_Ca / g_L (4.5); thesis range [0, 5] (Table 4.1)
+    sigma_in: NonNegative | None = None  # (4.8) inward slow conductance (V < E_s); None: sigma_s
+    sigma_out: NonNegative | None = None  # (4.8) outward slow conductance (V > E_s); None: sigma_s
+
+
+class PatternFormation(Strict):
+    """Constants of the joint's two PF neurons (4.9)."""
+
+    alpha: NonNegative  # slope; thesis ]0, 10] (Table 4.1), author's code 0.015-0.022 (digest §5)
+    theta: Number = 0.0  # threshold; thesis [-0.5, 0.5] (Table 4.1), author's code 0 (digest §5)
+    alpha_mlr: Number = 1.0  # descending slope modulation (4.9); author's code default 1 (digest §5)
+    theta_mlr: Number = 0.0  # descending threshold modulation (4.9): +0.5 extensor, -0.5 flexor domination (L1160)
+
+
+class Joint(Strict):
+    """One joint's CPG: RG, PF and MN neurons, extensor (E) and flexor (F), and its synaptic table."""
+
+    name: Name
+    rg: RhythmGenerator
+    pf: PatternFormation
+    rg_mutual: Number = -1.0  # RG-E -> RG-F and RG-F -> RG-E, Table 4.1 (L1349)
+    w_rg2pf: Number = 1.0  # (4.10), Table 4.1 (RG-E -> PF-E = 1)
+    w_pf2mn: Number = 1.0  # (4.12), Table 4.1 (PF-E -> MN-E = 1)
+    synapses: dict[Name, dict[Target, Number]] = {}  # sensory neuron -> {target: weight}
+    gain: Number = 1.0  # M of (3.6) (voltage) or G of theta_0 + G (MN_E - MN_F) (position)
+    theta0: Number = 0.0  # position command offset, rad
+    angle_input: Name | None = None  # input holding this joint's angle (for theta_0 := angle on a switch)
+
+
+class SensoryNeuron(Strict):
+    """(4.13) rho = 1 / (1 + exp(alpha (theta - phi))), phi = the named input."""
+
+    name: Name
+    input: Name
+    alpha: Number
+    theta: Number
+
+
+class Coupling(Strict):
+    """An RG -> RG synapse: ``source``/``target`` are ``joint.E`` or ``joint.F``."""
+
+    source: str
+    target: str
+    weight: Number
+
+
+class Kick(Strict):
+    """A current pulse at a scheduled time: +amplitude into each joint's RG-F, -amplitude into RG-E."""
+
+    joints: list[Name] = Field(min_length=1)
+    start: NonNegative  # s
+    duration: Positive  # s
+    amplitude: Number
+
+
+class PhaseReset(Strict):
+    """Phase resetting (digest §7.10): when ``sensor`` rises through ``threshold``, a pulse into ``joint``'s RG."""
+
+    sensor: Name
+    joint: Name
+    amplitude: Number = -1.0  # into RG-F (RG-E gets +1): the sign that starts extension (stance), §7.10
+    duration: Positive = 0.04  # s, §7.10
+    threshold: Number = 0.5  # GB "rising through 0.5", §7.10
+    enabled: bool = True
+
+
+class Switch(Strict):
+    """Pattern switching (digest §7.11): new (sigma_s, sigma_f) for the named joints, V = q = 0, theta_0 := the
+    measured angle, then a kick of ``kick`` (into RG-F; RG-E gets its negative) for ``kick_duration`` s.
+    Triggered once, at time ``at`` or when the input ``input`` exceeds ``above``."""
+
+    joints: dict[Name, RhythmGenerator] = Field(min_length=1)
+    at: NonNegative | None = None
+    input: Name | None = None
+    above: Number | None = None
+    kick: Number = 1.0  # §7.11 ("kick +-I"), I = 1 as the kicks of §7.1
+    kick_duration: Positive = 0.2  # s, §7.11 / §5 (the author's later scripts)
+
+
+class Circuit(Strict):
+    """A whole MLMP-CPG: what the network is built from."""
+
+    name: Name
+    description: str = ""
+    command: Literal["voltage", "position"]
+    cell: Cell = Cell()
+    motor_neuron: MotorNeuronConstants = MotorNeuronConstants()
+    inputs: list[Name] = []
+    sensory_neurons: list[SensoryNeuron] = []
+    joints: list[Joint] = Field(min_length=1)
+    couplings: list[Coupling] = []
+    kicks: list[Kick] = []
+    phase_resets: list[PhaseReset] = []
+    switches: list[Switch] = []
+
+    def joint_index(self, name: str) -> int:
+        return [j.name for j in self.joints].index(name)
+
+    def neuron_index(self, ref: str) -> int:
+        """Index of ``joint.E`` / ``joint.F`` in the network's neuron vector (2 j for E, 2 j + 1 for F)."""
+        joint, side = ref.split(".")
+        return 2 * self.joint_index(joint) + (0 if side == "E" else 1)
+
+
+# --------------------------------------------------------------------------------------------
+# Loading, checking, overriding
+# --------------------------------------------------------------------------------------------
+
+
+def _fields_at(loc: tuple) -> list[str]:
+    """Valid keys at ``loc`` in a circuit (list indices and dict keys skipped), for did-you-mean."""
+    model: Any = Circuit
+    for part in loc:
+        if not (isinstance(model, type) and issubclass(model, BaseModel)):
+            return []
+        if isinstance(part, int):
+            continue
+        field = model.model_fields.get(str(part))
+        if field is None:
+            return []
+        model = _inner_model(field.annotation)
+        if model is None:
+            return []
+    return list(model.model_fields) if isinstance(model, type) and issubclass(model, BaseModel) else []
+
+
+def _inner_model(annotation: Any) -> Any:
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return annotation
+    for arg in getattr(annotation, "__args__", ()):
+        found = _inner_model(arg)
+        if found is not None:
+            return found
+    return None
+
+
+def _schema_problems(exc: ValidationError) -> list[Problem]:
+    problems = problems_from(exc, Circuit)
+    out = []
+    for err, problem in zip(exc.errors(), problems, strict=False):
+        if err["type"] == "extra_forbidden":  # scenario's resolver does not walk lists of models
+            loc = tuple(err["loc"])
+            valid = _fields_at(loc[:-1])
+            message = f"unknown key; expected one of {sorted(valid)}"
+            problem = Problem(problem.path, message, nearest(str(loc[-1]), valid))
+        out.append(problem)
+    return out
+
+
+def _reference_problems(c: Circuit) -> list[Problem]:
+    """Names that must exist: inputs, sensory neurons, joints, ``joint.E``/``joint.F``."""
+    out: list[Problem] = []
+    joints = [j.name for j in c.joints]
+    sensors = [s.name for s in c.sensory_neurons]
+    neurons = [f"{j}.{side}" for j in joints for side in ("E", "F")]
+
+    def need(path: str, given: str | None, valid: list[str], what: str) -> None:
+        if given is not None and given not in valid:
+            out.append(Problem(path, f"expected one of the {what} {valid}; got {given!r}", nearest(given, valid)))
+
+    def unique(path: str, names: list[str]) -> None:
+        seen = set()
+        for i, n in enumerate(names):
+            if n in seen:
+                out.append(Problem(f"{path}.{i}.name", f"expected a unique name; got {n!r} twice"))
+            seen.add(n)
+
+    unique("joints", joints)
+    unique("sensory_neurons", sensors)
+    if len(set(c.inputs)) != len(c.inputs):
+        out.append(Problem("inputs", f"expected unique names; got {c.inputs}"))
+    for i, s in enumerate(c.sensory_neurons):
+        need(f"sensory_neurons.{i}.input", s.input, c.inputs, "inputs")
+    for i, j in enumerate(c.joints):
+        for source in j.synapses:
+            need(f"joints.{i}.synapses.{source}", source, sensors, "sensory neurons")
+        need(f"joints.{i}.angle_input", j.angle_input, c.inputs, "inputs")
+        if c.command == "voltage" and j.theta0 != 0.0:
+            out.append(Problem(f"joints.{i}.theta0", f"expected 0 for a voltage command; got {j.theta0}"))
+    for i, k in enumerate(c.couplings):
+        need(f"couplings.{i}.source", k.source, neurons, "RG neurons")
+        need(f"couplings.{i}.target", k.target, neurons, "RG neurons")
+    for i, k in enumerate(c.kicks):
+        for n, name in enumerate(k.joints):
+            need(f"kicks.{i}.joints.{n}", name, joints, "joints")
+    for i, r in enumerate(c.phase_resets):
+        need(f"phase_resets.{i}.sensor", r.sensor, sensors, "sensory neurons")
+        need(f"phase_resets.{i}.joint", r.joint, joints, "joints")
+    for i, s in enumerate(c.switches):
+        for name in s.joints:
+            need(f"switches.{i}.joints.{name}", name, joints, "joints")
+        if (s.at is None) == (s.input is None):
+            out.append(Problem(f"switches.{i}", "expected exactly one trigger, `at` or `input`; got both or neither"))
+        if s.input is not None:
+            need(f"switches.{i}.input", s.input, c.inputs, "inputs")
+            if s.above is None:
+                out.append(Problem(f"switches.{i}.above", "required key is missing (with `input`)"))
+    return out
+
+
+def validate_circuit(data: Any, file: str = "<circuit>") -> Circuit:
+    """Check a circuit given as plain data (a dict as read from YAML); raise ``ScenarioError`` listing every problem."""
+    if not isinstance(data, dict):
+        raise ScenarioError(file, [Problem("", f"expected a mapping; got {type(data).__name__}")])
+    try:
+        circuit = Circuit.model_validate(data)
+    except ValidationError as exc:
+        raise ScenarioError(file, _schema_problems(exc)) from None
+    problems = _reference_problems(circuit)
+    if problems:
+        raise ScenarioError(file, problems)
+    return circuit
+
+
+def circuit_path(name_or_path: str | Path) -> Path:
+    """A shipped circuit by name (``planar_8link``) or any YAML file by path."""
+    path = Path(name_or_path)
+    if path.suffix in (".yaml", ".yml"):
+        return path
+    return CIRCUITS / f"{name_or_path}.yaml"
+
+
+def read_circuit_data(name_or_path: str | Path) -> dict:
+    """The circuit file's raw data, unvalidated (to apply overrides to)."""
+    path = circuit_path(name_or_path)
+    if not path.exists():
+        shipped = sorted(p.stem for p in CIRCUITS.glob("*.yaml"))
+        problem = Problem("", f"no such circuit; shipped: {shipped}", nearest(str(name_or_path), shipped))
+        raise ScenarioError(str(path), [problem])
+    try:
+        return yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise ScenarioError(str(path), [Problem("", f"expected valid YAML; got {exc}")]) from None
+
+
+def load_circuit(name_or_path: str | Path, overrides: dict[str, Any] | None = None) -> Circuit:
+    """Read, override (``{"couplings.0.weight": 1.5}``) and validate a circuit."""
+    path = circuit_path(name_or_path)
+    data = read_circuit_data(path)
+    return apply_overrides(data, overrides or {}, file=str(path))
+
+
+def apply_overrides(circuit_dict: dict, overrides: dict[str, Any], file: str = "<circuit>") -> Circuit:
+    """Set values at dotted key paths (list items by index: ``joints.0.rg.sigma_s``), then re-validate.
+
+    The input dict is not changed. A path that does not exist in the file is an error naming it (a new key
+    inside an existing mapping is allowed: the schema then says whether it is valid)."""
+    data = copy.deepcopy(circuit_dict)
+    problems = []
+    for dotted, value in overrides.items():
+        parts = dotted.split(".")
+        node: Any = data
+        for depth, part in enumerate(parts[:-1]):
+            node, problem = _child(node, part, ".".join(parts[: depth + 1]))
+            if problem:
+                problems.append(problem)
+                break
+        else:
+            last = parts[-1]
+            if isinstance(node, list):
+                if not (last.isdigit() and int(last) < len(node)):
+                    problems.append(Problem(dotted, f"expected an index below {len(node)}; got {last!r}"))
+                    continue
+                node[int(last)] = value
+            elif isinstance(node, dict):
+                node[last] = value
+            else:
+                problems.append(Problem(dotted, f"expected a mapping or list to set a key in; got {node!r}"))
+    if problems:
+        raise ScenarioError(file, problems)
+    return validate_circuit(data, file)
+
+
+def _child(node: Any, part: str, path: str) -> tuple[Any, Problem | None]:
+    if isinstance(node, list):
+        if part.isdigit() and int(part) < len(node):
+            return node[int(part)], None
+        return None, Problem(path, f"expected an index below {len(node)}; got {part!r}")
+    if isinstance(node, dict):
+        if part in node:
+            return node[part], None
+        keys = [str(k) for k in node]
+        return None, Problem(path, f"no such key; expected one of {sorted(keys)}", nearest(part, keys))
+    return None, Problem(path, f"expected a mapping or list; got {node!r}")

@@ -1,0 +1,416 @@
+"""The MLMP-CPG core (modules/cpg): cell equations against hand-written RK4, the pattern classes of the digest's
+reference map, anti-phase locking, the energy ordering, determinism, and the circuit files' checking."""
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from modules.cpg import CPGNetwork, apply_overrides, load_circuit, validate_circuit
+from modules.cpg.circuit import CIRCUITS, read_circuit_data
+from modules.cpg.patterns import (
+    ALMOST_OSCILLATOR,
+    KICK_DURATION,
+    OSCILLATOR,
+    PLATEAU,
+    QUIESCENT,
+    classify,
+    energy,
+    log_energy,
+    pattern_space_point,
+    simulate_one_joint,
+)
+from sfl_brain.scenario import ScenarioError
+
+DT = 0.01  # control tick, s
+
+
+def one_joint(**joint) -> dict:
+    base = {"name": "j", "rg": {"sigma_s": 2.0, "sigma_f": 2.0}, "pf": {"alpha": 1.0}}
+    return {"name": "one", "command": "position", "joints": [{**base, **joint}]}
+
+
+# ------------------------------------------------------------------------------------------------
+# Cell equations against one RK4 step written out by hand
+# ------------------------------------------------------------------------------------------------
+
+
+def hand_rk4_step(V, q, i_ext, w, sigma_s, sigma_f, tau_m, tau_s, A_f, E_s, h, sigma_in=None, sigma_out=None):
+    """One classic RK4 step of two cells (E, F) coupled by w through tanh(V / A_f), scalars only."""
+    sigma_in = sigma_s if sigma_in is None else sigma_in
+    sigma_out = sigma_s if sigma_out is None else sigma_out
+
+    def f(V, q):
+        dV, dq = [], []
+        for me, other in ((0, 1), (1, 0)):
+            i = i_ext[me] + w * math.tanh(V[other] / A_f)  # §7.3
+            fast = V[me] - A_f * math.tanh(sigma_f / A_f * V[me])  # (4.4)
+            dV.append(-(fast + q[me] - i) / tau_m)  # (4.1)
+            sigma = sigma_in if V[me] < E_s else sigma_out  # (4.8)
+            dq.append((-q[me] + sigma * (V[me] - E_s)) / tau_s)  # (4.2), (4.6)
+        return dV, dq
+
+    def plus(x, k, c):
+        return [a + c * b for a, b in zip(x, k, strict=True)]
+
+    k1V, k1q = f(V, q)
+    k2V, k2q = f(plus(V, k1V, h / 2), plus(q, k1q, h / 2))
+    k3V, k3q = f(plus(V, k2V, h / 2), plus(q, k2q, h / 2))
+    k4V, k4q = f(plus(V, k3V, h), plus(q, k3q, h))
+    V1 = [V[c] + h / 6 * (k1V[c] + 2 * k2V[c] + 2 * k3V[c] + k4V[c]) for c in (0, 1)]
+    q1 = [q[c] + h / 6 * (k1q[c] + 2 * k2q[c] + 2 * k3q[c] + k4q[c]) for c in (0, 1)]
+    return V1, q1
+
+
+@pytest.mark.parametrize("split", [False, True], ids=["(4.6)", "(4.8)"])
+def test_rhythm_generator_step_equals_rk4_by_hand(split):
+    rg = {"sigma_s": 1.7, "sigma_f": 2.3}
+    if split:
+        rg.update(sigma_in=0.9, sigma_out=2.1)
+    data = one_joint(rg=rg, rg_mutual=-0.8)
+    data["cell"] = {"tau_m": 0.05, "tau_s": 1.0, "A_f": 5.0, "E_s": 0.3}
+    data["kicks"] = [{"joints": ["j"], "start": 0.0, "duration": 0.01, "amplitude": 0.7}]
+    network = CPGNetwork(validate_circuit(data))
+    V0, q0 = [0.4, -1.3], [0.25, 0.6]
+    network.y[0, 0], network.y[0, 1] = V0, q0
+    network.advance(None, control_dt=0.001, substeps=1)
+    V1, q1 = hand_rk4_step(
+        V0, q0, [-0.7, 0.7], -0.8, 1.7, 2.3, 0.05, 1.0, 5.0, 0.3, 0.001, *((0.9, 2.1) if split else ())
+    )
+    np.testing.assert_allclose(network.membrane_potential[0], V1, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(network.slow_current[0], q1, rtol=0, atol=1e-12)
+
+
+def test_coupled_joints_step_equals_rk4_by_hand():
+    """Two joints, a coupling j.E -> k.F of weight 0.6 and no intra-joint synapse: k.F gets 0.6 tanh(V_jE / A_f)."""
+    data = one_joint(rg_mutual=0.0)
+    data["joints"].append({**data["joints"][0], "name": "k"})
+    data["couplings"] = [{"source": "j.E", "target": "k.F", "weight": 0.6}]
+    network = CPGNetwork(validate_circuit(data))
+    network.y[0, 0] = [1.1, -0.2, 0.3, 0.5]
+    network.y[0, 1] = [0.1, 0.2, -0.3, 0.4]
+    network.advance(None, control_dt=0.001, substeps=1)
+
+    def f(V, q):  # all four cells; k.F gets the synapse
+        out = []
+        for c in range(4):
+            i = 0.6 * math.tanh(V[0] / 5.0) if c == 3 else 0.0
+            out.append((-(V[c] - 5.0 * math.tanh(2.0 / 5.0 * V[c]) + q[c] - i) / 0.05, (-q[c] + 2.0 * V[c]) / 1.0))
+        return [o[0] for o in out], [o[1] for o in out]
+
+    V, q, h = [1.1, -0.2, 0.3, 0.5], [0.1, 0.2, -0.3, 0.4], 0.001
+    k1 = f(V, q)
+    k2 = f(
+        [v + h / 2 * d for v, d in zip(V, k1[0], strict=True)], [x + h / 2 * d for x, d in zip(q, k1[1], strict=True)]
+    )
+    k3 = f(
+        [v + h / 2 * d for v, d in zip(V, k2[0], strict=True)], [x + h / 2 * d for x, d in zip(q, k2[1], strict=True)]
+    )
+    k4 = f([v + h * d for v, d in zip(V, k3[0], strict=True)], [x + h * d for x, d in zip(q, k3[1], strict=True)])
+    V1 = [V[c] + h / 6 * (k1[0][c] + 2 * k2[0][c] + 2 * k3[0][c] + k4[0][c]) for c in range(4)]
+    np.testing.assert_allclose(network.membrane_potential.ravel(), V1, rtol=0, atol=1e-12)
+
+
+def test_pattern_formation_motor_and_sensory_neurons_by_hand():
+    """(4.9)-(4.13) with the (n + 1) averaging, theta_MLR with opposite signs on E and F (§7.6)."""
+    data = one_joint(
+        pf={"alpha": 2.0, "theta": 0.1, "alpha_mlr": 0.5, "theta_mlr": 0.3},
+        synapses={"S": {"PF_E": 0.2, "MN_F": -0.4}, "T": {"PF_E": 0.0, "MN_E": 0.9}},
+    )
+    data["inputs"] = ["a", "b"]
+    data["sensory_neurons"] = [
+        {"name": "S", "input": "a", "alpha": 3.0, "theta": 0.2},
+        {"name": "T", "input": "b", "alpha": -2.0, "theta": 0.5},
+    ]
+    network = CPGNetwork(validate_circuit(data))
+    network.advance(np.array([0.7, -0.1]), control_dt=0.001, substeps=1)  # V stays 0 (no kick) ...
+    network.y[0, 0] = [1.5, -2.5]  # ... so set it and recompute the static layers
+    network._outputs(network._sensory)
+    S = 1.0 / (1.0 + math.exp(3.0 * (0.2 - 0.7)))  # (4.13)
+    T = 1.0 / (1.0 + math.exp(-2.0 * (0.5 - (-0.1))))
+    I_pf_E = (1.5 + 0.2 * S + 0.0 * T) / 3  # (4.10): two synapses declared on PF-E, zero weight included (§7.5)
+    I_pf_F = -2.5 / 1
+    PF_E = 1.0 / (1.0 + math.exp(2.0 * 0.5 * ((0.1 - 0.3) - I_pf_E)))  # (4.9), theta_eff,E = theta - theta_MLR
+    PF_F = 1.0 / (1.0 + math.exp(2.0 * 0.5 * ((0.1 + 0.3) - I_pf_F)))  # theta_eff,F = theta + theta_MLR
+    MN_E = 1.0 / (1.0 + math.exp(5.0 * (0.5 - (PF_E + 0.9 * T) / 2)))  # (4.11), (4.12)
+    MN_F = 1.0 / (1.0 + math.exp(5.0 * (0.5 - (PF_F - 0.4 * S) / 2)))
+    np.testing.assert_allclose(network.sensory, [S, T], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(network.pattern_formation[0], [PF_E, PF_F], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(network.motor_neuron[0], [MN_E, MN_F], rtol=0, atol=1e-12)
+    assert network.command()[0] == pytest.approx(1.0 * (MN_E - MN_F), abs=1e-12)
+
+
+# ------------------------------------------------------------------------------------------------
+# Patterns
+# ------------------------------------------------------------------------------------------------
+
+# (sigma_s, sigma_f) -> class, from the digest's numerical reference map (CPG-HUMANOID.md §1.7)
+DOCUMENTED = {
+    (0.0, 2.0): PLATEAU,  # sigma_s = 0, bistable
+    (0.5, 3.0): PLATEAU,  # below the line sigma_s = (sigma_f - 1) / 2
+    (1.0, 0.25): QUIESCENT,  # sigma_f <= 0.25
+    (3.0, 0.0): QUIESCENT,
+    (4.0, 0.75): ALMOST_OSCILLATOR,  # sigma_f in [0.5, 1]
+    (5.0, 1.0): ALMOST_OSCILLATOR,
+    (1.0, 2.0): OSCILLATOR,  # period 2.25 s
+    (2.0, 2.0): OSCILLATOR,  # 1.25 s
+    (5.0, 2.0): OSCILLATOR,  # 0.69 s
+}
+PERIODS = {(1.0, 2.0): 2.25, (2.0, 2.0): 1.25, (5.0, 2.0): 0.69}
+
+
+@pytest.fixture(scope="module")
+def single_cell_runs():
+    """Every documented point as one batch: the joint's E and F uncoupled (the digest's single cell), 20 s."""
+    points = list(DOCUMENTED)
+    traces = simulate_one_joint([p[0] for p in points], [p[1] for p in points], duration=20.0, rg_mutual=0.0)
+    return points, traces
+
+
+def test_each_pattern_class_from_its_documented_parameters(single_cell_runs):
+    points, traces = single_cell_runs
+    for n, point in enumerate(points):
+        pattern = classify(traces["V_F"][:, n], DT, KICK_DURATION)
+        assert pattern.kind == DOCUMENTED[point], (point, pattern)
+        if point in PERIODS:
+            assert 1.0 / pattern.frequency == pytest.approx(PERIODS[point], abs=0.02), point
+
+
+def test_energy_orders_plateau_quiescent_almost_oscillators_by_frequency(single_cell_runs):
+    """Fig. 4.16 (L1298): plateau < quiescent < almost-oscillator < oscillators, by frequency; the joint angle
+    theta = MN_E - MN_F, 10 s from the end of the kick (§7.13), PF slope 1 (the planar circuit's)."""
+    points, traces = single_cell_runs
+    start = int(round(KICK_DURATION / DT))
+    log_e = log_energy(traces["angle"][start : start + 1001], DT)
+    kinds = [classify(traces["V_F"][:, n], DT, KICK_DURATION) for n in range(len(points))]
+    by_class = {k: [log_e[n] for n, p in enumerate(kinds) if p.kind == k] for k in (PLATEAU, QUIESCENT)}
+    by_class[ALMOST_OSCILLATOR] = [log_e[n] for n, p in enumerate(kinds) if p.kind == ALMOST_OSCILLATOR]
+    assert max(by_class[PLATEAU]) < min(by_class[QUIESCENT])
+    assert max(by_class[QUIESCENT]) < min(by_class[ALMOST_OSCILLATOR])
+    oscillators = sorted((p.frequency, log_e[n]) for n, p in enumerate(kinds) if p.kind == OSCILLATOR)
+    assert max(by_class[ALMOST_OSCILLATOR]) < oscillators[0][1]
+    assert [e for _, e in oscillators] == sorted(e for _, e in oscillators)
+
+
+def test_energy_is_the_integral_of_the_squared_angular_velocity():
+    t = np.arange(0, 10.0 + 1e-9, 1e-3)
+    angle = 0.3 * np.sin(2 * np.pi * t)  # integral of (0.6 pi cos)^2 over 10 periods = 10 * (0.6 pi)^2 / 2
+    assert energy(angle, 1e-3) == pytest.approx(10 * (0.6 * np.pi) ** 2 / 2, rel=1e-4)
+    point = pattern_space_point({"hip": angle, "knee": np.zeros_like(t)}, 1e-3)
+    assert point["hip"] == pytest.approx(np.log10(10 * (0.6 * np.pi) ** 2 / 2), abs=1e-4)
+    assert point["knee"] == -12.0  # a still joint sits on the floor of the axis
+
+
+def test_rhythm_deletion_keeps_the_phase():
+    """alpha_MLR = 0 holds the joint still (PF = 1/2 on both sides) while the RG keeps its rhythm; restored, the joint
+    moves exactly as if nothing had happened (L1104, L1156)."""
+    circuit = load_circuit("planar_8link")
+    hip = circuit.joint_index("hip_l")
+    deleted, reference = CPGNetwork(circuit), CPGNetwork(circuit)
+    held = []
+    for tick in range(300):
+        if tick == 100:
+            deleted.set_descending(alpha_mlr=0.0, joints=["hip_l"])
+        if tick == 200:
+            deleted.set_descending(alpha_mlr=1.0, joints=["hip_l"])
+        deleted.advance()
+        reference.advance()
+        if 100 <= tick < 200:
+            held.append(deleted.command()[hip])
+            np.testing.assert_array_equal(deleted.pattern_formation[hip], [0.5, 0.5])
+    assert np.ptp(held) == 0.0 and np.ptp(reference.command()) > 0
+    np.testing.assert_array_equal(deleted.membrane_potential, reference.membrane_potential)
+    np.testing.assert_array_equal(deleted.command(), reference.command())
+
+
+# ------------------------------------------------------------------------------------------------
+# Circuits running
+# ------------------------------------------------------------------------------------------------
+
+
+def run(network: CPGNetwork, seconds: float, kinematic: bool = False) -> dict[str, np.ndarray]:
+    """Run ``seconds``; with ``kinematic``, each joint's sensed angle is its last command (no body)."""
+    circuit = network.circuit
+    sensors = np.zeros(len(circuit.inputs))
+    angle_at = [(circuit.inputs.index(j.angle_input), n) for n, j in enumerate(circuit.joints) if j.angle_input]
+    V, commands = [], []
+    for _ in range(int(round(seconds / DT))):
+        if kinematic:
+            command = network.command()
+            for i, n in angle_at:
+                sensors[i] = command[n]
+        network.advance(sensors)
+        V.append(network.membrane_potential)
+        commands.append(network.command())
+    return {"V": np.array(V), "command": np.array(commands)}
+
+
+@pytest.mark.parametrize(
+    ("name", "left", "right"), [("planar_8link", "hip_l", "hip_r"), ("humanoid_nao", "hip_pitch_l", "hip_pitch_r")]
+)
+def test_coupled_hips_lock_in_anti_phase_from_a_one_sided_kick(name, left, right):
+    circuit = load_circuit(name)
+    assert [k.joints for k in circuit.kicks] == [[left]]  # only the left hip is kicked
+    out = run(CPGNetwork(circuit), 6.0, kinematic=True)
+    late = out["V"][-200:]
+    l, r = late[:, circuit.joint_index(left), 1], late[:, circuit.joint_index(right), 1]
+    assert np.ptp(l) > 5 and np.ptp(r) > 5  # both oscillate
+    assert np.corrcoef(l, r)[0, 1] < -0.95
+
+
+def test_humanoid_circuit_runs_standalone_with_finite_outputs():
+    network = CPGNetwork(load_circuit("humanoid_nao"))
+    assert network.n_joints == 12
+    out = run(network, 3.0, kinematic=True)
+    assert np.isfinite(out["V"]).all() and np.isfinite(out["command"]).all()
+    assert np.isfinite(network.neuron_values()).all()
+    assert len(network.neuron_names()) == network.neuron_values().size
+    hip = network.circuit.joint_index("hip_pitch_l")
+    assert 0.05 < np.ptp(out["command"][-100:, hip]) < 1.0  # rad: it walks-sized, not frozen, not wild
+
+
+def test_author_code_circuit_gives_the_published_amplitudes():
+    """Digest §5: with V = +-6.16 at (17.5, 17.5), amplitudes +-0.133 rad hip pitch, +-0.147 roll, +-0.100 knee."""
+    circuit = load_circuit("author_code")
+    out = run(CPGNetwork(circuit), 3.0)
+    half_range = np.ptp(out["command"][-100:], axis=0) / 2
+    for joint, amplitude in (("hip_pitch_l", 0.133), ("hip_roll_l", 0.147), ("knee_l", 0.100)):
+        assert half_range[circuit.joint_index(joint)] == pytest.approx(amplitude, abs=0.002), joint
+    assert half_range[circuit.joint_index("ankle_pitch_l")] == 0.0  # alpha = 0 freezes it, as in the code
+
+
+def test_same_seed_gives_identical_arrays_and_reset_restores_the_circuit():
+    data = read_circuit_data("planar_8link")
+    data["switches"] = [{"joints": {"knee_l": {"sigma_s": 1.0, "sigma_f": 0.25}}, "at": 0.5}]
+    circuit = validate_circuit(data)
+    rng = np.random.default_rng(3)
+    sensors = rng.uniform(-0.5, 0.5, size=(100, len(circuit.inputs)))
+    sensors[:, circuit.inputs.index("heel_l")] = np.where(np.arange(100) % 40 < 20, 150.0, 0.0)  # heel strikes
+    traces = []
+    for network in (CPGNetwork(circuit), CPGNetwork(circuit)):
+        for seed in (7, 7):
+            network.reset(seed)
+            traces.append(np.array([(network.advance(s), network.neuron_values())[1] for s in sensors]))
+    for other in traces[1:]:
+        np.testing.assert_array_equal(traces[0], other)
+
+
+def test_phase_reset_pulses_on_heel_strike_and_can_be_switched_off():
+    circuit = load_circuit("planar_8link")
+    heel = circuit.inputs.index("heel_l")
+    before, after = {}, {}
+    for enabled in (True, False):
+        network = CPGNetwork(circuit)
+        network.phase_reset_enabled[:] = enabled
+        sensors = np.zeros(len(circuit.inputs))
+        for tick in range(60):
+            sensors[heel] = 200.0 if tick >= 50 else 0.0  # heel strike at tick 50
+            network.advance(sensors)
+            if tick == 49:
+                before[enabled] = network.membrane_potential
+        after[enabled] = network.membrane_potential
+    np.testing.assert_array_equal(before[True], before[False])
+    hip = circuit.joint_index("hip_l")
+    assert after[True][hip, 0] - after[False][hip, 0] > 0.1  # +1 into RG-E ... (§7.10)
+    assert after[True][hip, 1] - after[False][hip, 1] < -0.1  # ... and -1 into RG-F of the left hip
+
+
+def test_pattern_switch_sets_the_pattern_resets_the_cell_and_takes_the_measured_angle():
+    data = read_circuit_data("humanoid_nao")
+    data["switches"] = [{"joints": {"knee_l": {"sigma_s": 1.0, "sigma_f": 0.25}}, "input": "torso_pitch", "above": 0.3}]
+    circuit = validate_circuit(data)
+    network = CPGNetwork(circuit)
+    knee = circuit.joint_index("knee_l")
+    sensors = np.zeros(len(circuit.inputs))
+    sensors[circuit.inputs.index("knee_l")] = 0.9
+    for _ in range(100):
+        network.advance(sensors)
+    assert network.sigma_s[0, 2 * knee] == 5.0
+    sensors[circuit.inputs.index("torso_pitch")] = 0.5  # the push detector fires
+    network.advance(sensors, control_dt=0.001, substeps=1)
+    assert network.sigma_s[0, 2 * knee] == 1.0 and network.sigma_f[0, 2 * knee + 1] == 0.25
+    assert network.theta0[0, knee] == 0.9
+    V = network.membrane_potential[knee]
+    assert -0.03 < V[0] < 0 < V[1] < 0.03  # from V = 0, one 1-ms step of the +1 (F) / -1 (E) kick
+    theta0 = network.theta0.copy()
+    for _ in range(50):
+        network.advance(sensors)  # fires once only
+    np.testing.assert_array_equal(network.theta0, theta0)
+
+
+# ------------------------------------------------------------------------------------------------
+# Circuit files: checking and overriding
+# ------------------------------------------------------------------------------------------------
+
+
+def test_every_shipped_circuit_loads():
+    names = sorted(p.stem for p in CIRCUITS.glob("*.yaml"))
+    assert names == ["author_code", "humanoid_nao", "planar_8link"]
+    joints = {name: len(load_circuit(name).joints) for name in names}
+    assert joints == {"author_code": 12, "humanoid_nao": 12, "planar_8link": 7}
+
+
+def write(tmp_path: Path, data: dict) -> Path:
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_a_bad_key_fails_with_its_key_path(tmp_path):
+    data = read_circuit_data("planar_8link")
+    data["joints"][2]["pf"]["alpah"] = data["joints"][2]["pf"].pop("alpha")
+    path = write(tmp_path, data)
+    with pytest.raises(ScenarioError) as err:
+        load_circuit(path)
+    assert str(err.value) == (
+        f"{path}: joints.2.pf.alpha: required key is missing\n"
+        f"{path}: joints.2.pf.alpah: unknown key; expected one of ['alpha', 'alpha_mlr', 'theta', 'theta_mlr'] "
+        "(did you mean `alpha`?)"
+    )
+
+
+def test_a_bad_reference_names_both_ends(tmp_path):
+    data = read_circuit_data("planar_8link")
+    data["couplings"][0]["source"] = "hipl.E"
+    data["joints"][0]["synapses"]["ES_hipl"] = data["joints"][0]["synapses"].pop("ES_hip_l")
+    with pytest.raises(ScenarioError) as err:
+        validate_circuit(data, "planar.yaml")
+    lines = str(err.value).splitlines()
+    assert lines[0].startswith("planar.yaml: joints.0.synapses.ES_hipl: expected one of the sensory neurons [")
+    assert lines[0].endswith("; got 'ES_hipl' (did you mean `ES_hip_l`?)")
+    assert lines[1].startswith("planar.yaml: couplings.0.source: expected one of the RG neurons ['hip_l.E', ")
+    assert lines[1].endswith("; got 'hipl.E' (did you mean `hip_l.E`?)")
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ("2.0", "joints.0.rg.sigma_s: expected a number; got '2.0' (did you mean `2.0`?)"),
+        (True, "joints.0.rg.sigma_s: expected a number; got true"),
+        (float("nan"), "joints.0.rg.sigma_s: expected a finite number; got .nan"),
+        (float("inf"), "joints.0.rg.sigma_s: expected a finite number; got .inf"),
+        (-1.0, "joints.0.rg.sigma_s: input should be greater than or equal to 0; got -1.0"),
+    ],
+)
+def test_circuit_numbers_are_strict_and_finite(value, message):
+    with pytest.raises(ScenarioError) as err:
+        apply_overrides(read_circuit_data("planar_8link"), {"joints.0.rg.sigma_s": value}, file="c.yaml")
+    assert str(err.value) == f"c.yaml: {message}"
+
+
+def test_overrides_set_a_weight_by_dotted_path_and_revalidate():
+    data = read_circuit_data("planar_8link")
+    circuit = apply_overrides(data, {"couplings.0.weight": 1.5, "phase_resets.1.enabled": False})
+    assert circuit.couplings[0].weight == 1.5 and circuit.phase_resets[1].enabled is False
+    assert data["couplings"][0]["weight"] == 1.0  # the input is not changed
+    network = CPGNetwork(circuit)
+    assert network.coupling[circuit.neuron_index("hip_r.F"), circuit.neuron_index("hip_l.E")] == 1.5
+    with pytest.raises(ScenarioError) as err:
+        apply_overrides(data, {"couplings.99.weight": 1.5, "joints.0.rgg.sigma_s": 1.0}, file="c.yaml")
+    assert str(err.value) == (
+        "c.yaml: couplings.99: expected an index below 12; got '99'\n"
+        "c.yaml: joints.0.rgg: no such key; expected one of "
+        "['angle_input', 'gain', 'name', 'pf', 'rg', 'synapses'] (did you mean `rg`?)"
+    )
