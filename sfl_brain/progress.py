@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 from rich.console import Console
@@ -61,16 +62,17 @@ class ProgressView:
         self.bar.update(self.task, total=p.planned, completed=p.trials, status=status)
 
     def report(self, run_dir: Path, summary: dict) -> None:
-        c = self.console
+        # whole lines: a stop reason is read and grepped, never wrapped at the terminal's width
+        say = functools.partial(self.console.print, soft_wrap=True)
         colour = {"completed": "green", "failed": "red", "stalled": "yellow", "interrupted": "yellow"}.get(
             summary["status"], "red"
         )
-        c.print(f"[bold {colour}]{summary['status']}[/] (exit code {summary.get('exit_code')}): {run_dir}")
+        say(f"[bold {colour}]{summary['status']}[/] (exit code {summary.get('exit_code')}): {run_dir}")
         if summary.get("stop_reason"):
-            c.print(f"  stop reason: {summary['stop_reason']}", markup=False, highlight=False)
+            say(f"  stop reason: {summary['stop_reason']}", markup=False, highlight=False)
         rate = summary.get("success_rate")
         planned = summary.get("planned_trials")
-        c.print(
+        say(
             f"  trials {summary['trials']}{f' of {planned}' if planned is not None else ''} "
             f"(successes {summary['successes']}, failures {summary['failures']}), "
             f"decisions {summary['decisions']} (no-go {summary['no_go']}), "
@@ -81,5 +83,5 @@ class ProgressView:
         dropped = summary.get("dropped") or {}
         total = sum(n for counts in dropped.values() for n in counts.values())
         if total:
-            c.print(f"  dropped {total} messages that were not the run's own (by process: logs/*.counters.json)")
-        c.print(f"  inspect: sfl inspect {run_dir}    view: rerun {run_dir / 'recording.rrd'}")
+            say(f"  dropped {total} messages that were not the run's own (by process: logs/*.counters.json)")
+        say(f"  inspect: sfl inspect {run_dir}    view: rerun {run_dir / 'recording.rrd'}")

@@ -56,9 +56,14 @@ def test_learn_run_records_everything_and_matches_in_process(tmp_path):
     # same scenario and seed in one process: identical records
     local = run_local(load(SCENARIOS / "analytic_learn.yaml", ["protocol.trials=60"]))
     assert stable(local) == stable(read_records(out))
-    # sfl inspect --json prints exactly the summary fields
+    # sfl inspect --json prints the status first, then exactly the summary fields
     inspected = json.loads(sfl("inspect", str(out), "--json").stdout)
+    assert list(inspected)[:3] == ["status", "stop_reason", "planned_trials"]
+    assert inspected["status"] == "completed" and inspected["planned_trials"] == 60
     assert set(inspected) == {
+        "status",
+        "stop_reason",
+        "planned_trials",
         "trials",
         "successes",
         "failures",
@@ -74,7 +79,7 @@ def test_learn_run_records_everything_and_matches_in_process(tmp_path):
     report = sfl("report", str(out), "--out", str(tmp_path / "report"))
     assert report.returncode == 0, report.stderr
     assert (tmp_path / "report" / "run.png").stat().st_size > 10_000
-    assert "| run | learn | 0.0 | 60 |" in (tmp_path / "report" / "README.md").read_text()
+    assert "| run | completed | learn | 0.0 | 60 |" in (tmp_path / "report" / "README.md").read_text()
 
 
 def test_sfl_list_names_every_registered_implementation():
