@@ -145,13 +145,30 @@ class ACC(Module):
 
     @on(Finish)
     def on_finish(self, msg: Finish) -> Ack:
+        path = self._checkpoint_path(msg.path) if msg.path else None  # refused before anything changes
         removed = self.prune_failure_map() if msg.prune else np.array([], dtype=int)
-        if msg.path:
-            self.checkpoint(msg.path)
+        if path is not None:
+            self.checkpoint(path)
         if self.recording is not None:
             self.log_maps()
             self.flush_maps()
         return Ack(detail=f"pruned {removed.size} failure neurons: {removed.tolist()}")
+
+    def _checkpoint_path(self, path: str) -> Path:
+        """Where ``Finish.path`` may be written: inside the run folder (``self.run_dir``, set by the
+        host), relative paths resolved against it; anything that escapes it (``..``, an absolute
+        path elsewhere, a symlink out) is refused. Without a run folder (in-process use) as given."""
+        run_dir = getattr(self, "run_dir", None)
+        target = Path(path)
+        if target.suffix != ".npz":
+            target = target.with_name(target.name + ".npz")  # what np.savez writes
+        if run_dir is None:
+            return target
+        root = Path(run_dir).resolve()
+        resolved = (root / target).resolve()  # an absolute target stays itself; symlinks are followed
+        if not resolved.is_relative_to(root) or resolved == root:
+            raise ValueError(f"acc.finish: refusing to write {path!r}: outside the run folder {root}")
+        return resolved
 
     def _maps(self):
         return (("success", self.success_map), ("failure", self.failure_map))

@@ -1,21 +1,36 @@
-"""Zenoh plumbing: session configuration, key expressions, and request helpers.
+"""Zenoh plumbing: session configuration, key expressions, the run secret, and drop counters.
 
 Every key the framework uses is built here:
 
 * ``sfl/<run_id>/<instance>/<tag>``: messages for one module instance;
-* ``sfl/<run_id>/@alive/<instance>``: liveliness token of a running module.
+* ``sfl/<run_id>/@alive/<instance>/<proof>``: liveliness token of a running module (``<proof>``
+  shows that its owner holds the run secret; no ``/<proof>`` for a host started without one).
 
 Sessions listen and connect on 127.0.0.1 with multicast scouting off unless the
 user passes other endpoints; peers find each other by gossip through the first
 endpoint, so the mesh is direct between every pair of processes.
+
+A run has a secret (:class:`Seal`): requests and replies carry a keyed MAC, liveliness tokens
+a proof, and lockstep frames the current trial's nonce (see ``docs/wire.md``); what lacks them is
+dropped and counted. Transport authentication and encryption (TLS, Zenoh user/password) are the
+user's, through a Zenoh config file (:func:`open_session` says why not the secret by default).
 """
 
 from __future__ import annotations
 
+import errno
+import hashlib
+import hmac
 import json
+import logging
+import os
 import socket
+import threading
+from pathlib import Path
 
 import zenoh
+
+from .status import EnvironmentProblem
 
 #: keep-alive lease: a silent peer is declared gone after this many ms
 LEASE_MS = 1000
@@ -25,12 +40,27 @@ def key(run_id: str, instance: str, tag: str) -> str:
     return f"sfl/{run_id}/{instance}/{tag}"
 
 
-def alive_key(run_id: str, instance: str = "*") -> str:
-    return f"sfl/{run_id}/@alive/{instance}"
+def alive_key(run_id: str, instance: str = "*", proof: str | None = None) -> str:
+    """The liveliness key of ``instance``; ``proof`` (see :meth:`Seal.alive_proof`) is one more chunk."""
+    return f"sfl/{run_id}/@alive/{instance}" + (f"/{proof}" if proof else "")
 
 
-def instance_from_alive_key(key_expr: str) -> str:
-    return str(key_expr).rsplit("/", 1)[-1]
+def parse_alive_key(key_expr) -> tuple[str, str | None]:
+    """(instance, proof or None) of a liveliness key; anything after the proof makes it ('', None)."""
+    parts = str(key_expr).split("/")
+    try:
+        rest = parts[parts.index("@alive") + 1 :]
+    except ValueError:
+        return "", None
+    if len(rest) == 1:
+        return rest[0], None
+    if len(rest) == 2:
+        return rest[0], rest[1]
+    return "", None
+
+
+def instance_from_alive_key(key_expr) -> str:
+    return parse_alive_key(key_expr)[0]
 
 
 def free_endpoint(host: str = "127.0.0.1") -> str:
@@ -40,9 +70,41 @@ def free_endpoint(host: str = "127.0.0.1") -> str:
         return f"tcp/{host}:{s.getsockname()[1]}"
 
 
-def config(listen: list[str] | None = None, connect: list[str] | None = None) -> zenoh.Config:
-    """A peer configuration: loopback, multicast scouting off, short lease."""
-    conf = zenoh.Config()
+def check_listen(endpoints: list[str]) -> None:
+    """Raise EnvironmentProblem (one line) if a ``tcp/HOST:PORT`` endpoint cannot be bound."""
+    for ep in endpoints:
+        proto, _, address = ep.partition("/")
+        if proto != "tcp" or ":" not in address:
+            continue
+        host, _, port = address.rpartition(":")
+        host = host.strip("[]")
+        try:
+            port_n = int(port.split("#")[0])
+        except ValueError:
+            continue
+        if port_n == 0:
+            continue
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        with socket.socket(family, socket.SOCK_STREAM) as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as Zenoh does: TIME_WAIT is fine
+            try:
+                s.bind((host, port_n))
+            except OSError as exc:
+                why = "port in use" if exc.errno == errno.EADDRINUSE else (exc.strerror or str(exc))
+                raise EnvironmentProblem(f"cannot listen on {ep}: {why}") from None
+
+
+def config(
+    listen: list[str] | None = None,
+    connect: list[str] | None = None,
+    *,
+    zenoh_config: str | Path | None = None,
+) -> zenoh.Config:
+    """A peer configuration: loopback, multicast scouting off, short lease.
+
+    ``zenoh_config`` (a JSON5 file: TLS, user/password, ...) is loaded first and our settings go
+    on top of it."""
+    conf = zenoh.Config.from_file(str(zenoh_config)) if zenoh_config else zenoh.Config()
     conf.insert_json5("mode", '"peer"')
     conf.insert_json5("listen/endpoints", json.dumps(listen if listen is not None else ["tcp/127.0.0.1:0"]))
     conf.insert_json5("connect/endpoints", json.dumps(connect or []))
@@ -52,5 +114,130 @@ def config(listen: list[str] | None = None, connect: list[str] | None = None) ->
     return conf
 
 
-def open_session(listen: list[str] | None = None, connect: list[str] | None = None) -> zenoh.Session:
-    return zenoh.open(config(listen, connect))
+def open_session(
+    listen: list[str] | None = None,
+    connect: list[str] | None = None,
+    *,
+    zenoh_config: str | Path | None = None,
+) -> zenoh.Session:
+    """Open a peer session (loopback, no multicast scouting), with the user's Zenoh config under ours.
+
+    The run secret is not used as a Zenoh transport password: with ``transport/auth/usrpwd``, peers
+    that find each other by gossip and connect both ways are refused (``Close(INVALID)``, zenoh issue
+    #2577), and a mesh then misses links at random (seen here: a joining peer reached 2 of 4 modules
+    in about one try in three). A run authenticates its members itself (:class:`Seal`); transport
+    authentication and encryption (TLS, or user/password on links that connect one way) are the
+    user's, through ``zenoh_config`` (``docs/reliability.md``)."""
+    return zenoh.open(config(listen, connect, zenoh_config=zenoh_config))
+
+
+def new_secret() -> str:
+    import secrets
+
+    return secrets.token_hex(16)
+
+
+def read_secret(env: str = "SFL_RUN_SECRET", path: str | Path | None = None) -> str | None:
+    """A run secret from a file (first line) or the environment variable ``env``."""
+    if path:
+        return Path(path).read_text().strip() or None
+    return os.environ.get(env) or None
+
+
+class Seal:
+    """Sign and check what members of one run send each other, with the run secret.
+
+    * A request is ``nonce (8 bytes) | MAC (16) | payload``; the MAC (keyed BLAKE2b) covers the
+      key expression, the nonce and the payload, so a request cannot be moved to another module.
+    * A reply (also an error reply) is ``MAC (16) | payload``, the MAC over the request's nonce
+      and the payload: a reply answers one request only.
+    * A liveliness token's proof is ``<nonce>-<MAC of run id, instance, nonce>``.
+
+    Without a secret (a host started by hand, the benchmarks) the key is empty: the format is the
+    same, but anyone can sign."""
+
+    NONCE = 8
+    MAC = 16
+
+    def __init__(self, secret: str | None) -> None:
+        self.secret = secret
+        self.key = secret.encode() if secret else b""
+
+    def _mac(self, *parts: bytes) -> bytes:
+        h = hashlib.blake2b(key=self.key, digest_size=self.MAC)
+        for p in parts:
+            h.update(len(p).to_bytes(4, "little"))
+            h.update(p)
+        return h.digest()
+
+    def seal_request(self, key_expr: str, payload: bytes, nonce: bytes | None = None) -> tuple[bytes, bytes]:
+        """(nonce, sealed payload) of a request to ``key_expr``."""
+        nonce = nonce or os.urandom(self.NONCE)
+        return nonce, nonce + self._mac(b"request", str(key_expr).encode(), nonce, payload) + payload
+
+    def open_request(self, key_expr: str, data: bytes) -> tuple[bytes, bytes] | None:
+        """(nonce, payload) of a sealed request, or None if it is not signed with this secret."""
+        head = self.NONCE + self.MAC
+        if len(data) < head:
+            return None
+        nonce, mac, payload = data[: self.NONCE], data[self.NONCE : head], data[head:]
+        if not hmac.compare_digest(mac, self._mac(b"request", str(key_expr).encode(), nonce, payload)):
+            return None
+        return nonce, payload
+
+    def seal_reply(self, nonce: bytes, payload: bytes) -> bytes:
+        return self._mac(b"reply", nonce, payload) + payload
+
+    def open_reply(self, nonce: bytes, data: bytes) -> bytes | None:
+        if len(data) < self.MAC:
+            return None
+        mac, payload = data[: self.MAC], data[self.MAC :]
+        if not hmac.compare_digest(mac, self._mac(b"reply", nonce, payload)):
+            return None
+        return payload
+
+    def alive_proof(self, run_id: str, instance: str, nonce: str) -> str | None:
+        """The last chunk of ``instance``'s liveliness key; None without a secret (no chunk)."""
+        if not self.secret:
+            return None
+        return f"{nonce}-{self._mac(b'alive', run_id.encode(), instance.encode(), nonce.encode()).hex()}"
+
+    def check_alive(self, run_id: str, instance: str, proof: str | None) -> str | None:
+        """The nonce of a valid proof, or None (forged, or no proof)."""
+        if not proof or "-" not in proof or not instance:
+            return None
+        nonce, _, mac = proof.partition("-")
+        expected = self._mac(b"alive", run_id.encode(), instance.encode(), nonce.encode()).hex()
+        return nonce if hmac.compare_digest(mac.encode(), expected.encode()) else None
+
+
+#: why a message was dropped
+DROP_REASONS = ("unauthenticated", "malformed", "stale", "foreign")
+
+
+class Drops:
+    """Counts of dropped messages by reason; each reason (and detail kind) is logged once, not per message."""
+
+    def __init__(self, logger: logging.Logger, who: str) -> None:
+        self.log = logger
+        self.who = who
+        self.counts: dict[str, int] = {}
+        self._logged: set[tuple[str, str]] = set()
+        self._lock = threading.Lock()
+
+    def __call__(self, reason: str, what: str, detail: str = "") -> None:
+        with self._lock:
+            self.counts[reason] = self.counts.get(reason, 0) + 1
+            first = (reason, what) not in self._logged
+            self._logged.add((reason, what))
+        if first:
+            self.log.warning(
+                "%s: dropped %s %s%s (further drops of this kind are counted, not logged)",
+                self.who,
+                reason,
+                what,
+                f": {detail}" if detail else "",
+            )
+
+    def write(self, path: Path) -> None:
+        path.write_text(json.dumps({"dropped": dict(self.counts)}, indent=1) + "\n")

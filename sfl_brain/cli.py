@@ -61,8 +61,16 @@ def check(scenario: str, overrides: tuple[str, ...]) -> None:
 @click.option("--realtime", is_flag=True, help="pace the body to wall-clock time")
 @click.option("--listen", multiple=True, help="Zenoh endpoint to listen on (default: a free 127.0.0.1 port)")
 @click.option("--connect", multiple=True, help="Zenoh endpoint to connect to")
+@click.option(
+    "--zenoh-config",
+    type=click.Path(dir_okay=False, exists=True),
+    default=None,
+    help="a Zenoh JSON5 config merged under sfl's own (TLS for network endpoints; docs/reliability.md)",
+)
 @click.option("--quiet", is_flag=True, help="no progress bar")
-def run_command(scenario, overrides, seed, out, viewer, viewer_url, realtime, listen, connect, quiet) -> None:
+def run_command(
+    scenario, overrides, seed, out, viewer, viewer_url, realtime, listen, connect, zenoh_config, quiet
+) -> None:
     """Run SCENARIO: one process per module, until the protocol completes."""
     from .progress import ProgressView
     from .run import run
@@ -73,10 +81,17 @@ def run_command(scenario, overrides, seed, out, viewer, viewer_url, realtime, li
     def ready(sup, seconds):
         view.ready(seconds)
         if listen:
-            click.echo(
-                f"sfl: run id {sup.run_id}; workers may join with: sfl worker {scenario} "
-                f"--connect {listen[0]} --run-id {sup.run_id}"
+            from .worker import join_command
+
+            join = join_command(
+                scenario,
+                listen[0],
+                sup.run_id,
+                overrides=overrides,
+                seed=plan.scenario.seed,
+                secret_file=sup.secret_file,
             )
+            click.echo(f"sfl: run id {sup.run_id}; workers may join with: {join}")
 
     with view:
         run_dir, summary = _start_or_exit(
@@ -89,6 +104,7 @@ def run_command(scenario, overrides, seed, out, viewer, viewer_url, realtime, li
                 connect=list(connect) or None,
                 on_progress=view.update,
                 on_ready=ready,
+                zenoh_config=zenoh_config,
             )
         )
     view.report(run_dir, summary)
@@ -213,34 +229,32 @@ def inspect(run_dir: Path, as_json: bool) -> None:
 @click.option("--connect", required=True, multiple=True, help="the run's Zenoh endpoint")
 @click.option("--run-id", required=True, help="the run id printed by sfl run")
 @click.option("--name", default="ext0", help="worker suffix (unique per worker)")
-@click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE")
-def worker(scenario, connect, run_id, name, overrides) -> None:
-    """Serve trials for a running run: a body worker with its controller in this process."""
-    from .host import main as host_main
-    from .runtime import hosted_spec
-    from .scenario import instance_seed
+@click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE", help="the run's --set overrides")
+@click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=None, help="the run's --seed")
+@click.option(
+    "--secret-file",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="file holding the run secret (the run folder's `secret`); default: $SFL_RUN_SECRET",
+)
+@click.option("--wait", type=click.FloatRange(0, None), default=30.0, show_default=True, help="s to wait for the run")
+@click.option("--zenoh-config", type=click.Path(dir_okay=False), default=None, help="Zenoh JSON5 config (TLS, ...)")
+def worker(scenario, connect, run_id, name, overrides, seed, secret_file, wait, zenoh_config) -> None:
+    """Serve trials for a running run: a body worker with its controller in this process.
 
-    plan = _load_or_exit(scenario, overrides)
-    body = next(i for i in plan.instances if i.spec_name == plan.body_spec)
-    ctrl = body.colocated or next((i for i in plan.instances if i.name == body.routes.get("controller.sensors")), None)
-    spec = {
-        "run_id": run_id,
-        "instance": f"{plan.body_spec}.{name}",
-        "spec_name": plan.body_spec,
-        "reference": body.reference,
-        "params": body.params,
-        "seed": instance_seed(plan.scenario.seed, plan.body_spec),
-        "routes": {},
-        "listen": ["tcp/127.0.0.1:0"],
-        "connect": list(connect),
-        "rrd": None,
-        "viewer": None,
-        "tick_timeout": plan.scenario.timeouts.tick,
-        "watch_stdin": False,
-        "colocated": hosted_spec(ctrl),
-    }
-    click.echo(f"sfl: worker {spec['instance']} joining run {run_id} via {', '.join(connect)}")
-    sys.exit(host_main([json.dumps(spec)]))
+    Exits 0 when the run ends, 130 on Ctrl-C, 1 if no run answers within --wait seconds."""
+    from .worker import WorkerError, resolve_secret, run_worker
+
+    plan = _load_or_exit(scenario, overrides, seed)
+    try:
+        secret = resolve_secret(secret_file)
+        code = run_worker(
+            plan, list(connect), run_id, name, secret=secret, wait=wait, zenoh_config=zenoh_config, say=click.echo
+        )
+    except WorkerError as exc:
+        click.echo(f"sfl worker: {exc}", err=True)
+        code = exc.code
+    sys.exit(code)
 
 
 @main.command()

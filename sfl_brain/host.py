@@ -1,4 +1,9 @@
-"""Host one module in its own process: ``python -m sfl_brain.host SPEC_JSON``.
+"""Host one module in its own process: ``python -m sfl_brain.host`` with the JSON spec on stdin.
+
+The spec (first line of stdin) holds the run secret, so it never shows on a command line (and
+has no argv size limit); the rest of stdin stays open, and its end means the parent is gone.
+``python -m sfl_brain.host SPEC_JSON`` (the spec as argument) is still read, for hosts started by
+hand or by the benchmarks: without a secret, anyone on the bus may sign messages.
 
 The host opens a Zenoh peer session, answers each request type the module
 handles on ``sfl/<run>/<instance>/<tag>``, publishes replies to stream messages
@@ -8,8 +13,11 @@ trial may run for seconds); lockstep stream messages are answered by a thread
 that blocks in the subscriber's channel. A lock makes sure the module never sees
 two messages at once.
 
-A malformed or unknown message is logged and dropped (a request gets an error
-reply). The host exits on SIGTERM, or when its parent goes away (stdin closes).
+A malformed, unsigned, stale or foreign message is dropped and counted by reason (a request
+gets an error reply); each kind is logged once. At exit the counts go to
+``<run_dir>/logs/<instance>.counters.json``. A controller answers only frames of the trial its
+last reset started, with that reset's nonce, tick after tick. The host exits on SIGTERM, or when
+its parent goes away (stdin closes).
 """
 
 from __future__ import annotations
@@ -23,13 +31,25 @@ import statistics
 import sys
 import threading
 import time
+from collections import deque
+from pathlib import Path
 from typing import Any
 
 import zenoh
 
 from . import bus
 from .body import Body, InProcessLink
-from .messages import ControllerReset, Message, MessageError, MotorCommand, SensorFrame, decode, decoder_for, encode
+from .messages import (
+    ControllerReset,
+    Message,
+    MessageError,
+    MotorCommand,
+    NonFiniteError,
+    SensorFrame,
+    decode,
+    decoder_for,
+    encode,
+)
 from .module import Module
 from .placement import pin, usable_cpus
 from .registry import resolve
@@ -96,15 +116,34 @@ class BusLink:
     The body's thread publishes a frame and waits in the subscriber's ring channel for the
     command (no Python thread handoff on the tick path): it polls for up to ``spin`` seconds
     while that pays (:class:`SpinThenSleep`), then blocks. A watchdog thread wakes the body with
-    an empty payload if a command is overdue, so a dead or hung controller interrupts the trial
-    after ``timeout`` seconds instead of blocking forever.
+    an empty payload if a command is overdue, so a hung controller interrupts the trial after
+    ``timeout`` seconds instead of blocking forever; a controller whose liveliness token goes
+    away (it died) interrupts it at once.
+
+    Every reset is a signed request whose nonce (8 random bytes) becomes the trial's stream
+    nonce: it is appended to each frame and must end each command (a bytes compare per tick,
+    no MAC), and a command must also carry the frame's trial and tick. Anything else is dropped
+    and counted in ``drops``.
     """
 
     def __init__(
-        self, session: zenoh.Session, run_id: str, body: str, controller: str, timeout: float, spin: float = 0.0
+        self,
+        session: zenoh.Session,
+        run_id: str,
+        body: str,
+        controller: str,
+        timeout: float,
+        spin: float = 0.0,
+        *,
+        secret: str | None = None,
+        drops: bus.Drops | None = None,
     ) -> None:
         self.session = session
         self.timeout = timeout
+        self.run_id = run_id
+        self.controller = controller
+        self.seal = bus.Seal(secret)
+        self.drops = drops or bus.Drops(log, body)
         # polling needs a core for the controller to answer on while the body polls: a body on
         # one core (a 1-core machine, or pinned by lockstep.pin_cpus, where polling measured
         # slower) sleeps at once
@@ -113,12 +152,34 @@ class BusLink:
         self.command_key = bus.key(run_id, body, MotorCommand.TAG)
         self.publisher = session.declare_publisher(bus.key(run_id, controller, SensorFrame.TAG))
         self.subscriber = session.declare_subscriber(self.command_key, zenoh.handlers.RingChannel(64))
+        self.nonce = b""  # this trial's stream nonce (set by reset)
         self._waiting_since: float | None = None
         self._abort: str | None = None  # why the waiting tick must end (overdue command, stopping)
         self._stopping = False
         self._closed = threading.Event()
         self._watchdog = threading.Thread(target=self._watch, name="buslink-watchdog", daemon=True)
         self._watchdog.start()
+        # the controller's signed liveliness tokens: when the one we saw goes away, it died
+        self._controller_tokens: set[str] = set()
+        self._liveliness = session.liveliness().declare_subscriber(
+            bus.alive_key(run_id, controller, "*") if secret else bus.alive_key(run_id, controller),
+            zenoh.handlers.Callback(self._on_controller_token, indirect=False),
+            history=True,
+        )
+
+    def _on_controller_token(self, sample: zenoh.Sample) -> None:
+        key_expr = str(sample.key_expr)
+        if self.seal.secret:
+            instance, proof = bus.parse_alive_key(key_expr)
+            if instance != self.controller or self.seal.check_alive(self.run_id, instance, proof) is None:
+                self.drops("unauthenticated", "liveliness token", key_expr)
+                return
+        if sample.kind == zenoh.SampleKind.PUT:
+            self._controller_tokens.add(key_expr)
+        elif key_expr in self._controller_tokens:
+            self._controller_tokens.discard(key_expr)
+            if self._waiting_since is not None and self._abort is None:
+                self._wake(f"the controller `{self.controller}` went away at tick {{tick}}")
 
     def _wake(self, reason: str) -> None:
         """End the waiting tick with LinkError(reason, ``{tick}`` filled in); an empty payload wakes recv()."""
@@ -147,8 +208,9 @@ class BusLink:
         while self.subscriber.try_recv() is not None:  # drop stale commands and wake-ups
             pass
         self.waiter.restart()
+        self.nonce = os.urandom(bus.Seal.NONCE)  # a new trial, a new stream nonce
         try:
-            request(self.session, self.reset_key, msg, self.timeout)
+            request(self.session, self.reset_key, msg, self.timeout, seal=self.seal, nonce=self.nonce)
         except NoReply as exc:  # a late controller interrupts the trial (it is retried); its errors do not
             raise LinkError(f"controller reset for trial {msg.trial_id}: {exc}") from None
 
@@ -156,7 +218,8 @@ class BusLink:
         clock = time.perf_counter
         if not self._stopping:
             self._abort = None
-        self.publisher.put(encode(frame))
+        nonce = self.nonce
+        self.publisher.put(encode(frame) + nonce)
         # the bookkeeping runs while the controller works on the frame, not before it is sent
         now = self._waiting_since = clock()
         spin = self.waiter.next_tick(now)
@@ -174,17 +237,23 @@ class BusLink:
                     raise LinkError("interrupted: " + self._abort.format(tick=frame.tick))
                 if not data:
                     continue  # a late wake-up from an earlier tick
-                try:
-                    command = _decode_command(data)
-                except MessageError as exc:
-                    log.warning("dropped malformed command: %s", exc)
+                if data[-8:] != nonce:
+                    self.drops("foreign", "command", "not this trial's stream nonce")
                     continue
-                if (
-                    type(command) is not MotorCommand
-                    or command.trial_id != frame.trial_id
-                    or command.tick != frame.tick
-                ):
-                    log.warning("dropped unexpected message %s", getattr(command, "TAG", command))
+                try:
+                    command = _decode_command(data[:-8])
+                except MessageError as exc:
+                    self.drops("malformed", "command", str(exc))
+                    continue
+                if type(command) is not MotorCommand:
+                    self.drops("malformed", "command", f"a {getattr(command, 'TAG', command)} on the command key")
+                    continue
+                if command.trial_id != frame.trial_id or command.tick != frame.tick:
+                    self.drops(
+                        "stale",
+                        "command",
+                        f"trial {command.trial_id} tick {command.tick} while waiting for tick {frame.tick}",
+                    )
                     continue
                 return command
         finally:
@@ -192,6 +261,7 @@ class BusLink:
 
     def close(self) -> None:
         self._closed.set()
+        self._liveliness.undeclare()
         self.subscriber.undeclare()
         self.publisher.undeclare()
 
@@ -204,16 +274,36 @@ class NoReply(RemoteError):
     """Nobody answered a request within its timeout."""
 
 
-def request(session: zenoh.Session, key_expr: str, msg: Message, timeout: float) -> Message:
-    """Send ``msg`` to the queryable at ``key_expr`` and return its decoded reply."""
-    replies = session.get(key_expr, payload=encode(msg), timeout=timeout)
+def request(
+    session: zenoh.Session,
+    key_expr: str,
+    msg: Message,
+    timeout: float,
+    *,
+    seal: bus.Seal | None = None,
+    nonce: bytes | None = None,
+) -> Message:
+    """Send ``msg``, signed by ``seal`` (no secret: an empty key), to the queryable at ``key_expr``
+    and return its decoded reply. Replies not signed for this request are ignored."""
+    seal = seal or bus.Seal(None)
+    nonce, payload = seal.seal_request(key_expr, encode(msg), nonce)
+    replies = session.get(
+        key_expr,
+        payload=payload,
+        timeout=timeout,
+        target=zenoh.QueryTarget.ALL,
+        consolidation=zenoh.ConsolidationMode.NONE,  # every reply as it comes: a stranger's cannot hold ours
+    )
     for reply in replies:
         if reply.ok is not None:
-            return decode(reply.ok.payload.to_bytes())
-        text = reply.err.payload.to_string()
-        if text == "Timeout":  # what Zenoh answers when the queryable is there but late
-            break
-        raise RemoteError(text)
+            data = seal.open_reply(nonce, reply.ok.payload.to_bytes())
+            if data is not None:
+                return decode(data)
+            continue
+        text = seal.open_reply(nonce, reply.err.payload.to_bytes())
+        if text is None:  # Zenoh's own "Timeout", or a stranger's error
+            continue
+        raise RemoteError(text.decode(errors="replace"))
     raise NoReply(f"no reply from {key_expr} within {timeout:g} s")
 
 
@@ -247,6 +337,9 @@ def attach_sinks(rec, rrd: str | None, viewer: str | None) -> None:
 
 
 class Host:
+    #: request nonces remembered to refuse a replayed request
+    SEEN = 4096
+
     def __init__(self, spec: dict[str, Any]) -> None:
         self.spec = spec
         self.run_id = spec["run_id"]
@@ -256,6 +349,13 @@ class Host:
         self._lock = threading.Lock()  # the module sees one message at a time
         self._stopping = False
         self.link: BusLink | None = None  # a body's link to its controller in another process
+        self.seal = bus.Seal(spec.get("secret"))
+        self.drops = bus.Drops(log, self.instance)
+        self._seen: deque[bytes] = deque(maxlen=self.SEEN)
+        self._seen_set: set[bytes] = set()
+        # the lockstep stream of the current trial: [nonce, trial_id, next tick] (set by a controller reset)
+        self._stream: list | None = None
+        self.run_dir = Path(spec["run_dir"]) if spec.get("run_dir") else None
 
     def stop(self) -> None:
         """Leave the main loop; a trial in progress is interrupted at its next tick (from any thread)."""
@@ -273,7 +373,8 @@ class Host:
     def serve(self) -> None:
         spec = self.spec
         self.module = make_module(spec["reference"], spec["params"], spec["seed"], spec["spec_name"])
-        self.session = bus.open_session(spec["listen"], spec["connect"])
+        self.module.run_dir = self.run_dir  # where the module may write files (None: anywhere)
+        self.session = bus.open_session(spec["listen"], spec["connect"], zenoh_config=spec.get("zenoh_config"))
         declared = []
         streams: list[tuple[str, Any, threading.Thread]] = []
         rec = None
@@ -298,6 +399,8 @@ class Host:
                         spec["routes"][SensorFrame.TAG],
                         spec["tick_timeout"],
                         spec.get("spin", 0.0),
+                        secret=spec.get("secret"),
+                        drops=self.drops,
                     )
                     self.module.link = self.link
             for message_type in type(self.module).handles:
@@ -315,7 +418,8 @@ class Host:
                 else:
                     callback = zenoh.handlers.Callback(self._enqueue, indirect=False)
                     declared.append(self.session.declare_queryable(key_expr, callback))
-            token = self.session.liveliness().declare_token(bus.alive_key(self.run_id, self.instance))
+            proof = self.seal.alive_proof(self.run_id, self.instance, spec.get("nonce") or os.urandom(8).hex())
+            token = self.session.liveliness().declare_token(bus.alive_key(self.run_id, self.instance, proof))
             log.info("%s ready (%s)", self.instance, spec["reference"])
             self._loop()
             token.undeclare()
@@ -337,6 +441,16 @@ class Host:
                 rec.flush()
                 rec.disconnect()
             self.session.close()
+            self.write_counters()
+
+    def write_counters(self) -> None:
+        """``<run_dir>/logs/<instance>.counters.json``: ``{"dropped": {reason: n}}``."""
+        if self.run_dir is None:
+            return
+        try:
+            self.drops.write(self.run_dir / "logs" / f"{self.instance}.counters.json")
+        except OSError as exc:
+            log.warning("%s: could not write its drop counters: %s", self.instance, exc)
 
     def _loop(self) -> None:
         inbox = self.inbox
@@ -354,38 +468,82 @@ class Host:
                 except Exception:
                     log.exception("%s: deferred work failed", self.instance)
 
+    def _fresh(self, nonce: bytes) -> bool:
+        """False for a request nonce seen before (a replay)."""
+        if nonce in self._seen_set:
+            return False
+        if len(self._seen) == self._seen.maxlen:
+            self._seen_set.discard(self._seen[0])
+        self._seen.append(nonce)
+        self._seen_set.add(nonce)
+        return True
+
     def _answer(self, query: zenoh.Query) -> None:
+        nonce = None
         try:
             payload = query.payload
-            if payload is None:
-                raise MessageError("empty request")
-            msg = decode(payload.to_bytes())
+            data = payload.to_bytes() if payload is not None else b""
+            if len(data) < bus.Seal.NONCE + bus.Seal.MAC:
+                self.drops("malformed", "request", f"on {query.key_expr}: too short to be signed")
+                query.reply_err("malformed request: too short to be a signed request")
+                return
+            opened = self.seal.open_request(str(query.key_expr), data)
+            if opened is None:
+                self.drops("unauthenticated", "request", f"on {query.key_expr}: not signed with this run's secret")
+                query.reply_err("unauthenticated request: not signed with this run's secret")
+                return
+            nonce, body = opened
+            if not self._fresh(nonce):
+                self.drops("stale", "request", f"on {query.key_expr}: a replayed request")
+                return
+            msg = decode(body)
             reply = self.module.handle(msg)
-            query.reply(query.key_expr, encode(reply))
+            if type(msg) is ControllerReset:  # the trial whose frames this controller answers from now on
+                self._stream = [nonce, msg.trial_id, 0]
+            query.reply(query.key_expr, self.seal.seal_reply(nonce, encode(reply)))
         except MessageError as exc:
-            log.warning("%s: dropped malformed request on %s: %s", self.instance, query.key_expr, exc)
-            query.reply_err(f"malformed request: {exc}")
+            self.drops("malformed", "request", f"on {query.key_expr}: {exc}")
+            query.reply_err(self.seal.seal_reply(nonce, f"malformed request: {exc}".encode()))
         except Exception as exc:  # the module failed on this request: report, keep serving
             log.exception("%s: error handling request on %s", self.instance, query.key_expr)
-            query.reply_err(f"{type(exc).__name__}: {exc}")
+            if nonce is not None:
+                query.reply_err(self.seal.seal_reply(nonce, f"{type(exc).__name__}: {exc}".encode()))
         finally:
             query.drop()
 
     def _stream_loop(self, subscriber, message_type: type[Message]) -> None:
-        """Answer lockstep stream messages: decode, handle, publish the reply (one per tick)."""
-        handle, lock, publishers = self.module.handle, self._lock, self._publishers
+        """Answer lockstep stream messages: check the trial's nonce, decode, check trial and tick,
+        handle, publish the reply (one per tick) with the same nonce."""
+        handle, lock, publishers, drops = self.module.handle, self._lock, self._publishers, self.drops
         recv, decode_stream = subscriber.recv, decoder_for(message_type)
         while True:
             data = recv().payload.to_bytes()
             if self._stopping:
                 return
+            stream = self._stream
+            if stream is None or data[-8:] != stream[0]:
+                drops("foreign", f"{message_type.TAG} frame", "not the current trial's stream nonce")
+                continue
             try:
-                msg = decode_stream(data)
+                msg = decode_stream(data[:-8])
+            except (MessageError, NonFiniteError) as exc:  # a body checks its own sensors: not from it
+                drops("malformed", f"{message_type.TAG} frame", str(exc))
+                continue
+            if type(msg) is not message_type:
+                drops("malformed", f"{message_type.TAG} frame", f"a {getattr(msg, 'TAG', msg)}")
+                continue
+            tick = getattr(msg, "tick", None)
+            if tick is not None and (msg.trial_id != stream[1] or tick != stream[2]):
+                drops(
+                    "stale",
+                    f"{message_type.TAG} frame",
+                    f"trial {msg.trial_id} tick {tick} while expecting trial {stream[1]} tick {stream[2]}",
+                )
+                continue
+            stream[2] += 1
+            try:
                 with lock:
                     reply = handle(msg)
-            except MessageError as exc:
-                log.warning("%s: dropped malformed stream message: %s", self.instance, exc)
-                continue
             except Exception:
                 log.exception("%s: error handling a stream message", self.instance)
                 continue
@@ -394,7 +552,7 @@ class Host:
                 if publisher is None:
                     key_expr = self._reply_key(reply.TAG)
                     publisher = publishers[reply.TAG] = self.session.declare_publisher(key_expr)
-                publisher.put(encode(reply))
+                publisher.put(encode(reply) + stream[0])
 
 
 def _watch_parent(host: Host) -> None:
@@ -412,9 +570,25 @@ def _on_signal(host: Host, wake_r: int) -> None:
         host.stop()
 
 
+def read_spec(argv: list[str]) -> dict:
+    """The spec: the first line of stdin (``sfl run``, which passes ``--name INSTANCE`` for ``ps`` to
+    show), or the first argument (by hand, benchmarks)."""
+    if argv and argv[0] != "--name":
+        return json.loads(argv[0])
+    line = sys.stdin.buffer.readline()
+    if not line:
+        raise SystemExit("sfl_brain.host: expected the JSON spec on the first line of stdin")
+    return json.loads(line)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    spec = json.loads(argv[0])
+    return serve(read_spec(argv))
+
+
+def serve(spec: dict, *, on_sigint: bool = False, stop_event: threading.Event | None = None) -> int:
+    """Host ``spec`` until SIGTERM, the parent's end (stdin closes, unless ``watch_stdin`` is false),
+    or ``stop_event``; ``on_sigint`` also stops on Ctrl-C (``sfl worker``). Returns an exit code."""
     logging.basicConfig(
         level=spec.get("log_level", "INFO"),
         format=f"%(asctime)s {spec['instance']} %(levelname)s %(message)s",
@@ -430,10 +604,13 @@ def main(argv: list[str] | None = None) -> int:
     os.set_blocking(wake_w, False)
     signal.set_wakeup_fd(wake_w)
     signal.signal(signal.SIGTERM, lambda *_: None)
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the supervisor's to handle
+    # Ctrl-C is the supervisor's to handle, unless this process is on its own (sfl worker)
+    signal.signal(signal.SIGINT, (lambda *_: None) if on_sigint else signal.SIG_IGN)
     threading.Thread(target=_on_signal, args=(host, wake_r), daemon=True).start()
     if spec.get("watch_stdin", True):
         threading.Thread(target=_watch_parent, args=(host,), daemon=True).start()
+    if stop_event is not None:
+        threading.Thread(target=lambda: (stop_event.wait(), host.stop()), daemon=True).start()
     try:
         host.serve()
     except Exception:

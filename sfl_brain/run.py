@@ -222,7 +222,7 @@ def run(
     connect: list[str] | None = None,
     on_progress: Callable[[Progress], None] | None = None,
     on_ready: Callable[[Supervisor, float], None] | None = None,
-    supervisor_options: dict | None = None,
+    zenoh_config: str | Path | None = None,
 ) -> tuple[Path, dict]:
     """Run a scenario plan to its end; returns (run folder, summary).
 
@@ -251,7 +251,7 @@ def run(
         connect=connect,
         viewer=viewer_url,
         realtime=realtime,
-        **(supervisor_options or {}),
+        zenoh_config=zenoh_config,
     )
     (run_dir / "rerun").mkdir(exist_ok=True)
     rr_log = RerunLog(

@@ -6,6 +6,13 @@ process exiting) arrives on one event queue, so waiting for a reply also notices
 dead module at once instead of at a time-out. Bodies and controllers may be
 restarted by policy (they hold no state between trials); a trial they were running
 is retried. A brain module that dies ends the run with its name and log tail.
+
+Each run has a secret (``Supervisor.secret``), handed to the children on their stdin with the
+rest of their spec: their sessions authenticate each other with it, requests and replies are
+signed with it, and a liveliness token counts only with a proof made from it (for a child, with
+the nonce of its current spawn). What fails these checks is dropped and counted in
+``Supervisor.dropped``. The supervisor declares its own token (instance ``@run``): a worker
+joined with ``sfl worker`` stops when it goes away.
 """
 
 from __future__ import annotations
@@ -26,9 +33,10 @@ from pathlib import Path
 import zenoh
 
 from . import bus
-from .messages import Message, MessageError, decode, encode
+from .messages import Message, MessageError, NonFiniteError, decode, encode
 from .placement import assign, usable_cpus
 from .scenario import Instance, Plan
+from .status import EnvironmentProblem
 
 log = logging.getLogger("sfl.runtime")
 
@@ -50,6 +58,7 @@ class Child:
     alive: bool = False
     stopping: bool = False
     generation: int = 0
+    nonce: str = ""  # of the current spawn: its liveliness token must carry it
 
     @property
     def name(self) -> str:
@@ -101,6 +110,8 @@ class Supervisor:
         viewer: str | None = None,
         realtime: bool = False,
         record: bool = True,
+        zenoh_config: str | Path | None = None,
+        secret: str | None = None,
     ) -> None:
         self.plan = plan
         self.run_dir = run_dir
@@ -118,12 +129,33 @@ class Supervisor:
         self.session: zenoh.Session | None = None
         self._liveliness = None
         self.external_workers: list[str] = []
+        self._external_nonces: dict[str, str] = {}
+        #: a user's Zenoh configuration file (JSON5: TLS, ...), merged under ours for every session of the run
+        self.zenoh_config = str(zenoh_config) if zenoh_config else None
+        #: the run secret (never on a command line); ``secret_file`` holds it for ``sfl worker`` on this machine
+        self.secret = secret or bus.new_secret()
+        self.seal = bus.Seal(self.secret)
+        self.secret_file: Path | None = None
+        #: what the supervisor dropped, by reason: forged or stale liveliness tokens and worker
+        #: registrations, unsigned replies
+        self.dropped: dict[str, int] = {}
+        self._drops = bus.Drops(log, "supervisor")
+        self._drops.counts = self.dropped
+        self._token = None
         # a core of its own for each body worker and controller process, as lockstep.pin_cpus says
         self.placement = assign(plan.lockstep_processes, usable_cpus(), plan.scenario.lockstep.pin_cpus)
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:
-        self.session = bus.open_session(self.listen, self.connect)
+        if self.endpoint is None:
+            bus.check_listen(self.listen)  # a port in use: one clear line, not a Zenoh traceback
+        try:
+            self.session = bus.open_session(self.listen, self.connect, zenoh_config=self.zenoh_config)
+        except Exception as exc:  # zenoh.ZError: an endpoint it cannot listen on, a bad config file
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            raise EnvironmentProblem(
+                f"cannot open the run's Zenoh session (listen {', '.join(self.listen)}): {first}"
+            ) from None
         self._liveliness = self.session.liveliness().declare_subscriber(
             bus.alive_key(self.run_id, "**"),
             zenoh.handlers.Callback(self._on_liveliness, indirect=False),
@@ -131,6 +163,14 @@ class Supervisor:
         )
         (self.run_dir / "logs").mkdir(parents=True, exist_ok=True)
         (self.run_dir / "rerun").mkdir(parents=True, exist_ok=True)
+        if self.endpoint is None:  # others may join (sfl worker): the secret, readable by this user only
+            path = self.run_dir / "secret"
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+            with os.fdopen(fd, "w") as f:
+                f.write(self.secret + "\n")
+            self.secret_file = path
+        run_proof = self.seal.alive_proof(self.run_id, RUN_TOKEN, os.urandom(8).hex())
+        self._token = self.session.liveliness().declare_token(bus.alive_key(self.run_id, RUN_TOKEN, run_proof))
         for inst in self.plan.instances:
             child = Child(inst, self.run_dir / "logs" / f"{inst.name}.log")
             self.children[inst.name] = child
@@ -162,6 +202,9 @@ class Supervisor:
             "spin": self.plan.scenario.lockstep.spin_us * 1e-6,
             "colocated": hosted_spec(colocated),
             "cpus": self.placement.get(inst.name),
+            "run_dir": str(self.run_dir),
+            "secret": self.secret,
+            "zenoh_config": self.zenoh_config,
         }
         return spec
 
@@ -173,18 +216,25 @@ class Supervisor:
         return [f"tcp/{host}:0"]
 
     def _spawn(self, child: Child) -> None:
-        spec = json.dumps(self.spec_for(child.instance))
+        child.nonce = os.urandom(8).hex()
+        spec = self.spec_for(child.instance)
+        spec["nonce"] = child.nonce
         logf = open(child.log_path, "ab")  # noqa: SIM115 - handed to the child
         child.generation += 1
         child.alive = False
         child.proc = subprocess.Popen(
-            [sys.executable, "-m", "sfl_brain.host", spec],
+            [sys.executable, "-m", "sfl_brain.host", "--name", child.name],  # the name only, for ps
             stdin=subprocess.PIPE,
             stdout=logf,
             stderr=subprocess.STDOUT,
             start_new_session=True,  # Ctrl-C reaches the supervisor only; it stops the children
         )
         logf.close()
+        try:  # the spec (with the secret) on stdin, never on the command line; stdin stays open
+            child.proc.stdin.write(json.dumps(spec).encode() + b"\n")
+            child.proc.stdin.flush()
+        except OSError:  # it died at once: its exit event reports it
+            pass
         generation = child.generation
         threading.Thread(target=self._wait_exit, args=(child, child.proc, generation), daemon=True).start()
 
@@ -193,8 +243,12 @@ class Supervisor:
         self.events.put(("exit", child.name, code, generation))
 
     def _on_liveliness(self, sample: zenoh.Sample) -> None:
-        name = bus.instance_from_alive_key(sample.key_expr)
-        self.events.put(("alive" if sample.kind == zenoh.SampleKind.PUT else "gone", name))
+        name, proof = bus.parse_alive_key(sample.key_expr)
+        nonce = self.seal.check_alive(self.run_id, name, proof)
+        if nonce is None:  # no proof, or a forged one
+            self._drops("unauthenticated", "liveliness token", str(sample.key_expr))
+            return
+        self.events.put(("alive" if sample.kind == zenoh.SampleKind.PUT else "gone", name, nonce))
 
     def stop(self, grace: float = 3.0) -> None:
         """Stop every child: SIGTERM, then SIGKILL after ``grace`` seconds."""
@@ -223,6 +277,12 @@ class Supervisor:
         if self._liveliness is not None:
             self._liveliness.undeclare()
             self._liveliness = None
+        if self._token is not None:
+            self._token.undeclare()
+            self._token = None
+        if self.secret_file is not None:
+            self.secret_file.unlink(missing_ok=True)
+            self.secret_file = None
         if self.session is not None:
             self.session.close()
             self.session = None
@@ -251,27 +311,45 @@ class Supervisor:
                     return  # it died mid-request: its exit event decides (interrupt and restart, or fail)
                 if child is None and pending.target in self.external_workers:
                     pending.result = Interrupted(f"worker `{pending.target}` did not answer")
+                elif pending.target in self.plan.bodies:
+                    # a body worker that is alive but whose trial got no reply (its link to us dropped
+                    # under load): the trial is lost, not the run; it is retried like a crash
+                    pending.result = Interrupted(f"no reply from body worker `{pending.target}`")
                 else:
                     pending.result = RunError(f"no reply from `{pending.target}` to `{pending.message.TAG}`")
             pending.done = kind == "drop" or pending.result is not None
             return
         name = event[1]
         child = self.children.get(name)
+        if kind in ("alive", "gone") and name == RUN_TOKEN:
+            return  # our own token (or another supervisor's of this run id)
         if kind == "alive":
+            nonce = event[2]
             if child is not None:
+                if nonce != child.nonce:  # signed, but not by the process we spawned last
+                    self._drops("stale", "liveliness token", f"{name} with the nonce of another spawn")
+                    return
                 child.alive = True
                 log.info("%s is alive", name)
-            elif name.startswith(self.plan.body_spec + ".") and name not in self.external_workers:
+            elif not name.startswith(self.plan.body_spec + "."):
+                self._drops("foreign", "liveliness token", f"{name} is no module of this run")
+            elif name in self.external_workers:
+                if nonce != self._external_nonces.get(name):
+                    self._drops("stale", "worker registration", f"{name} is already registered")
+            else:
                 self.external_workers.append(name)  # a worker joined from elsewhere (sfl worker)
+                self._external_nonces[name] = nonce
                 log.info("external worker %s joined", name)
             return
         if kind == "gone":
+            nonce = event[2]
             if child is None:
-                if name in self.external_workers:
+                if name in self.external_workers and nonce == self._external_nonces.get(name):
                     self.external_workers.remove(name)
+                    del self._external_nonces[name]
                     self._interrupt(name, f"worker `{name}` left")
                 return
-            if child.stopping:
+            if child.stopping or nonce != child.nonce:  # a previous spawn's token going away
                 return
             child.alive = False
             if child.proc is not None and child.proc.poll() is None:
@@ -325,24 +403,35 @@ class Supervisor:
     def submit(self, target: str, message: Message, timeout: float) -> int:
         token = next(self._tokens)
         self.pending[token] = Pending(target, message)
-        events = self.events
+        events, seal, drops = self.events, self.seal, self._drops
+        key_expr = bus.key(self.run_id, target, message.TAG)
+        nonce, payload = seal.seal_request(key_expr, encode(message))
 
         def on_reply(reply: zenoh.Reply) -> None:
             if reply.ok is not None:
+                data = seal.open_reply(nonce, reply.ok.payload.to_bytes())
+                if data is None:
+                    drops("unauthenticated", "reply", f"to `{message.TAG}` on {key_expr}")
+                    return
                 try:
-                    events.put(("reply", token, decode(reply.ok.payload.to_bytes())))
-                except MessageError as exc:
+                    events.put(("reply", token, decode(data)))
+                except (MessageError, NonFiniteError) as exc:
                     events.put(("reply", token, RunError(f"malformed reply from `{target}`: {exc}")))
             else:
-                text = reply.err.payload.to_string()
+                data = seal.open_reply(nonce, reply.err.payload.to_bytes())
+                if data is None:  # Zenoh's own "Timeout" (the drop event decides), or a stranger's
+                    return
+                text = data.decode(errors="replace")
                 exc_type = Interrupted if text.startswith("LinkError") else RunError
                 events.put(("reply", token, exc_type(f"`{target}` failed on `{message.TAG}`: {text}")))
 
         self.session.get(
-            bus.key(self.run_id, target, message.TAG),
+            key_expr,
             zenoh.handlers.Callback(on_reply, lambda: events.put(("drop", token)), indirect=False),
-            payload=encode(message),
+            payload=payload,
             timeout=timeout,
+            target=zenoh.QueryTarget.ALL,
+            consolidation=zenoh.ConsolidationMode.NONE,  # every reply as it comes: a stranger's cannot hold ours
         )
         return token
 
@@ -369,12 +458,23 @@ class Supervisor:
             self._handle(self._next_event(0.5))
 
     def workers(self) -> list[str]:
-        """Body workers that are alive now (launched and joined from elsewhere)."""
-        own = [n for n in self.plan.bodies if self.children[n].alive]
+        """Body workers that can run a trial now (launched and joined from elsewhere): alive, and
+        their controller process too, so a trial retried after a controller restart starts as soon
+        as the replacement is up (not after a tick time-out)."""
+        own = []
+        for name in self.plan.bodies:
+            child = self.children[name]
+            controller = self.children.get(child.instance.routes.get("controller.sensors", ""))
+            if child.alive and (controller is None or controller.alive):
+                own.append(name)
         return own + list(self.external_workers)
 
     def pids(self) -> list[int]:
         return [c.proc.pid for c in self.children.values() if c.proc is not None]
+
+
+#: the instance name of the supervisor's own liveliness token
+RUN_TOKEN = "@run"
 
 
 def kill_quietly(pid: int) -> None:

@@ -50,19 +50,21 @@ def wait_for(predicate, timeout: float = 60.0) -> bool:
 
 
 @contextlib.contextmanager
-def joined_run(scenario, out, *sets: str, modules: int):
-    """Start ``sfl run --listen`` and join its mesh as one more peer once all ``modules`` are alive.
+def listening_run(scenario, out, *sets: str, modules: int, extra: tuple[str, ...] = ()):
+    """Start ``sfl run --listen`` and join its mesh as one more peer (with the run secret, read from
+    the run folder) once all ``modules`` are alive.
 
-    Yields (process, Zenoh session, run id); the caller waits for the process.
+    Yields a namespace: proc, session, run_id, endpoint, secret, join (the printed join command);
+    the caller waits for the process.
     """
-    import zenoh
+    import types
 
     from sfl_brain import bus
 
     endpoint = bus.free_endpoint()
     settings = [arg for s in sets for arg in ("--set", s)]
     proc = subprocess.Popen(
-        [sys.executable, "-m", "sfl_brain.cli", "run", str(scenario), *settings]
+        [sys.executable, "-m", "sfl_brain.cli", "run", str(scenario), *settings, *extra]
         + ["--listen", endpoint, "--out", str(out), "--quiet"],
         cwd=ROOT,
         stdout=subprocess.PIPE,
@@ -71,13 +73,38 @@ def joined_run(scenario, out, *sets: str, modules: int):
     )
     try:
         line = proc.stdout.readline()
-        assert "run id" in line, line
+        assert "run id" in line, line + proc.stderr.read() if proc.poll() is not None else line
         run_id = line.split("run id ")[1].split(";")[0]
-        with zenoh.open(bus.config(["tcp/127.0.0.1:0"], [endpoint])) as session:
+        secret = (Path(out) / "secret").read_text().strip()
+        with bus.open_session(["tcp/127.0.0.1:0"], [endpoint]) as session:
             # wait until this new peer sees every module of the run (gossip has reached it)
-            alive = bus.alive_key(run_id, "*")
-            assert wait_for(lambda: len(list(session.liveliness().get(alive, timeout=1.0))) == modules)
-            yield proc, session, run_id
+            alive = bus.alive_key(run_id, "*", "*")
+
+            names: set[str] = set()
+            watch = session.liveliness().declare_subscriber(
+                alive, lambda sample: names.add(bus.parse_alive_key(sample.key_expr)[0]), history=True
+            )
+
+            def seen():
+                if proc.poll() is not None:
+                    return True
+                replies = session.liveliness().get(alive, timeout=1.0)
+                names.update(bus.parse_alive_key(r.ok.key_expr)[0] for r in replies if r.ok)
+                return len(names) >= modules
+
+            assert wait_for(seen), "the run's modules did not all come alive"
+            assert proc.poll() is None, "the run ended before its modules were seen: " + proc.stderr.read()
+            watch.undeclare()
+            yield types.SimpleNamespace(
+                proc=proc, session=session, run_id=run_id, endpoint=endpoint, secret=secret, join=line
+            )
     except BaseException:
         proc.kill()
         raise
+
+
+@contextlib.contextmanager
+def joined_run(scenario, out, *sets: str, modules: int):
+    """:func:`listening_run`, yielding (process, Zenoh session, run id)."""
+    with listening_run(scenario, out, *sets, modules=modules) as run:
+        yield run.proc, run.session, run.run_id

@@ -229,8 +229,12 @@ def test_garbage_on_the_tick_keys_is_dropped_and_changes_nothing(tmp_path):
         finally:
             stop.set()
             sprayer.join()
-    assert "dropped malformed stream message" in (out / "logs" / "controller.log").read_text()
-    assert "dropped malformed command" in (out / "logs" / "body.log").read_text()
+    # none of it carries the trial's stream nonce: dropped as foreign, counted, logged once per kind
+    for instance in ("controller", "body"):
+        counted = json.loads((out / "logs" / f"{instance}.counters.json").read_text())["dropped"]
+        assert counted.get("foreign", 0) > 0, (instance, counted)
+    assert "not the current trial's stream nonce" in (out / "logs" / "controller.log").read_text()
+    assert "not this trial's stream nonce" in (out / "logs" / "body.log").read_text()
     local = run_local(load(SCENARIOS / "quickstart.yaml", sets))
     assert stable(local) == stable(read_records(out))
 

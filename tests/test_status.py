@@ -233,3 +233,16 @@ def test_viewer_without_a_display_fails_fast_with_a_hint(tmp_path):
 def test_exit_codes_are_documented():
     text = sfl("--help").stdout
     assert "Exit codes: 0 completed, 1 failed, 2 bad input, 3 stalled, 4 environment" in " ".join(text.split())
+
+
+def test_listen_on_a_port_in_use_is_an_environment_problem(tmp_path):
+    import socket
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        done = sfl_run(ANALYTIC, tmp_path / "run", "protocol.trials=5", extra=("--listen", f"tcp/127.0.0.1:{port}"))
+    assert done.returncode == 4, done.stderr
+    assert f"cannot listen on tcp/127.0.0.1:{port}: port in use" in done.stderr
+    assert "Traceback" not in done.stderr
