@@ -309,7 +309,7 @@ def run_learn(c: Conductor) -> dict:
             **{f"m_{k}": val for k, val in result.metrics.items()},
         }
         c.record_trial(progress, row)
-    finish: m.Ack = c.call(m.Finish(path=str(c.run_dir / "acc.npz"), prune=proto.prune_failure_map))
+    finish: m.Ack = c.call(m.Finish(path=str((c.run_dir / "acc.npz").resolve()), prune=proto.prune_failure_map))
     return {
         "planned_trials": proto.trials,
         "stalled": stalled,

@@ -246,3 +246,10 @@ def test_listen_on_a_port_in_use_is_an_environment_problem(tmp_path):
     assert done.returncode == 4, done.stderr
     assert f"cannot listen on tcp/127.0.0.1:{port}: port in use" in done.stderr
     assert "Traceback" not in done.stderr
+
+
+def test_a_relative_run_folder_keeps_its_maps(tmp_path):
+    """The README's main job writes to runs/... relative to where it is started."""
+    done = sfl("run", str(ANALYTIC), "--set", "protocol.trials=5", "--out", "runs/rel", "--quiet", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "runs" / "rel" / "acc.npz").exists()
