@@ -20,18 +20,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import stats  # noqa: E402
+from planar import REQUEST  # noqa: E402  (the planar benchmark's trial: the same stand-in physics)
 
 from bodies.planar_biped import PlanarBiped  # noqa: E402
 from modules.cpg import CPGNetwork, load_circuit  # noqa: E402
-from sfl_brain.messages import TrialRequest  # noqa: E402
-
-REQUEST = TrialRequest(
-    trial_id=0,
-    seed=0,
-    body_params={"slope_deg": 0.0},
-    controller_params={"alpha_hip": 10.0, "theta_hip_max_deg": 110.0},
-    log=False,
-)
 
 
 def cpg(name: str) -> tuple[CPGNetwork, np.ndarray]:

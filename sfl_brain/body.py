@@ -25,7 +25,6 @@ from pydantic import Field
 
 from .messages import (
     _F8,
-    CHECKED,
     Ack,
     ControllerReset,
     Message,
@@ -59,7 +58,7 @@ class InProcessLink:
         self.controller.handle(msg)
 
     def step(self, frame: SensorFrame) -> MotorCommand:
-        command = self.controller.handle(frame)
+        command = self.controller.handle(frame, checked=True)  # Body.trial checked its sensors
         # a command is checked where it lands (see Module.handle): one sum for a short vector
         if not _finite_vector(getattr(command, "values", None)) and isinstance(command, Message):
             check_finite(command, self.controller, "replied")
@@ -175,7 +174,7 @@ class Body(Module):
                 values = self.sense()
                 if not _finite_vector(values):
                     self._check_sensors(values, request.trial_id, tick)
-                frame = CHECKED[0] = SensorFrame(trial_id=request.trial_id, tick=tick, values=values)
+                frame = SensorFrame(trial_id=request.trial_id, tick=tick, values=values)
                 try:
                     command = step(frame)
                 except NonFiniteError as exc:

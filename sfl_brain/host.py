@@ -497,7 +497,7 @@ class Host:
                 self.drops("stale", "request", f"on {query.key_expr}: a replayed request")
                 return
             msg = decode(body)
-            reply = self.module.handle(msg)
+            reply = self.module.handle(msg, checked=True)
             if type(msg) is ControllerReset:  # the trial whose frames this controller answers from now on
                 self._stream = [nonce, msg.trial_id, 0]
             query.reply(query.key_expr, self.seal.seal_reply(nonce, encode(reply)))
@@ -543,7 +543,7 @@ class Host:
             stream[2] += 1
             try:
                 with lock:
-                    reply = handle(msg)
+                    reply = handle(msg, checked=True)  # decoded: checked by the codec
             except Exception:
                 log.exception("%s: error handling a stream message", self.instance)
                 continue

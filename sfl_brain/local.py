@@ -50,7 +50,7 @@ class LocalSupervisor:
     def _deliver(self, target: str, message: Message) -> Message:
         module = self.modules[target]
         if self.through_codec:
-            reply = decode(encode(module.handle(decode(encode(message)))))
+            reply = decode(encode(module.handle(decode(encode(message)), checked=True)))
         else:
             reply = module.handle(message)
         module.run_deferred()

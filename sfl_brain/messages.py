@@ -141,9 +141,6 @@ def _checker(annotation: Any):
 # --- finiteness --------------------------------------------------------------------
 _isfinite = math.isfinite
 _SHORT = 32  # up to this many values, sum(v.tolist()) is the cheapest test of a float64 vector
-#: the message a decoder or a body checked last: ``Module.handle`` does not check it again (any
-#: other thread may overwrite it, which only costs a second check; it never skips one)
-CHECKED: list[Message | None] = [None]
 
 
 def all_finite(v: np.ndarray) -> bool:
@@ -292,7 +289,7 @@ def _packed_layout(cls, names: tuple[str, ...], hints: dict) -> Packed:
     # values' finiteness does (one sum for a short vector, see all_finite)
     floats = [f"isfinite(s[{i}])" for i, n in enumerate(scalars) if hints[n] is float]
     fields = [f"{n}=s[{i}]" for i, n in enumerate(scalars)] + [f"{vector}=v"]
-    namespace |= {"isfinite": _isfinite, "all_finite": all_finite, "checked": CHECKED}
+    namespace |= {"isfinite": _isfinite, "all_finite": all_finite}
     namespace |= {"nonfinite": _packed_nonfinite, "names": names}
     decoder = _compile(
         [
@@ -306,8 +303,7 @@ def _packed_layout(cls, names: tuple[str, ...], hints: dict) -> Packed:
             + "".join(f" or not {c}" for c in floats)
             + ":",
             "        raise nonfinite(cls, names, s, v)",
-            f"    m = checked[0] = cls({', '.join(fields)})",
-            "    return m",
+            f"    return cls({', '.join(fields)})",
         ],
         dict(namespace),
     )
@@ -457,7 +453,6 @@ def decode(data: bytes) -> Message:
             raise MessageError(f"{tag}.{name}: expected {check}, got {type(value).__name__}")
     msg = cls(**dict(zip(cls._FIELDS, values, strict=True)))
     check_finite(msg)
-    CHECKED[0] = msg
     return msg
 
 

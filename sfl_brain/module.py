@@ -31,7 +31,7 @@ from typing import Any, ClassVar
 import numpy as np
 from pydantic import BaseModel, ConfigDict
 
-from .messages import CHECKED, Message, check_finite
+from .messages import Message, check_finite
 
 
 class ModuleParams(BaseModel):
@@ -99,21 +99,22 @@ class Module:
         for work in pending:
             work()
 
-    def handle(self, msg: Message) -> Message | None:
+    def handle(self, msg: Message, *, checked: bool = False) -> Message | None:
         """Dispatch a message to its handler by type.
 
         Raises :class:`~sfl_brain.messages.NonFiniteError` when ``msg`` or the reply holds NaN or
-        an infinity. A message the codec has just decoded was checked there and is not checked
-        again; a stream reply (a controller's command) is checked where it lands, by the body's
-        decoder or its in-process link, so that a controller in another process still sends it
-        and the body stops the trial at once instead of waiting for a command that never comes.
+        an infinity. ``checked``: the caller has checked ``msg`` already (the codec decoded it, or a
+        body built it from sensors it checked). A stream reply (a controller's command) is checked
+        where it lands, by the body's decoder or its in-process link, so that a controller in another
+        process still sends it and the body stops the trial at once instead of waiting for a command
+        that never comes.
         """
         if self._deferred:
             self.run_deferred()
         handler = self._handlers.get(type(msg))
         if handler is None:
             raise TypeError(f"{type(self).__name__} does not handle {msg.TAG!r}")
-        if msg is not CHECKED[0]:
+        if not checked:
             check_finite(msg, self, "received")
         reply = handler(msg)
         if reply is not None and not reply.STREAM:
