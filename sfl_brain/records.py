@@ -98,24 +98,19 @@ def read_records(run_dir: Path, damage: list[str] | None = None) -> list[dict]:
     rows: list[dict] = []
     if not path.exists():
         return rows
-    with open(path, "rb") as f:
-        data = f.read()
-    lines = data.split(b"\n")
-    torn_tail = lines[-1] != b""  # no newline at the end: the last row was being written
-    if not torn_tail:
-        lines.pop()
-    for number, line in enumerate(lines, 1):
-        try:
-            row = json.loads(line.decode("utf-8"))
-            if not isinstance(row, dict):
-                raise ValueError("not a JSON object")
-        except (UnicodeDecodeError, ValueError) as exc:
-            if damage is not None:
-                last = number == len(lines) and torn_tail
-                what = "a torn last row (the run was killed while writing it)" if last else f"a damaged row ({exc})"
-                damage.append(f"records.jsonl line {number}: {what}; read the {len(rows)} rows before it")
-            break
-        rows.append(row)
+    with open(path, "rb") as f:  # line by line: a long run's records need not fit in memory twice
+        for number, line in enumerate(f, 1):
+            try:
+                row = json.loads(line.decode("utf-8"))
+                if not isinstance(row, dict):
+                    raise ValueError("not a JSON object")
+            except (UnicodeDecodeError, ValueError) as exc:
+                if damage is not None:
+                    torn = not line.endswith(b"\n")  # the last line, cut while it was written
+                    what = "a torn last row (the run was killed while writing it)" if torn else f"a damaged row ({exc})"
+                    damage.append(f"records.jsonl line {number}: {what}; read the {len(rows)} rows before it")
+                break
+            rows.append(row)
     return rows
 
 
