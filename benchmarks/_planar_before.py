@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from bodies.planar_biped import FOOT_R, GROUND_R, PlanarBiped
+from sfl_brain.bodies.planar_biped import FOOT_R, GROUND_R, PlanarBiped
 
 
 class PlanarBipedBefore(PlanarBiped):

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from modules.acc import ACC
+from sfl_brain.modules.acc import ACC
 from sfl_brain.local import run_local
 from sfl_brain.messages import Evaluate
 from sfl_brain.run import run

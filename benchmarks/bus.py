@@ -40,7 +40,7 @@ import zenoh
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import controller_spec, spawn_host, stats, wait_alive  # noqa: E402
 
-from modules.controllers.open_loop import OpenLoopController  # noqa: E402
+from sfl_brain.modules.controllers.open_loop import OpenLoopController  # noqa: E402
 from sfl_brain import bus  # noqa: E402
 from sfl_brain.body import InProcessLink  # noqa: E402
 from sfl_brain.host import BusLink  # noqa: E402
@@ -81,7 +81,7 @@ PONG_EXAMPLE = textwrap.dedent("""
 # (typed): the raw pong with the framework's codec and the open-loop controller, by hand
 PONG_TYPED = textwrap.dedent("""
     from sfl_brain.messages import ControllerReset, decode, encode
-    from modules.controllers.open_loop import OpenLoopController
+    from sfl_brain.modules.controllers.open_loop import OpenLoopController
     controller = OpenLoopController()
     controller.handle(ControllerReset(trial_id=0, seed=0, params={}, sensors=["s"] * 8,
                                       commands=list(controller.COMMANDS)))
@@ -164,7 +164,7 @@ class Framework:
 
     def __init__(self, session, endpoint, cpus, spin):
         run_id = "benchbus"
-        reference = "modules.controllers.open_loop:OpenLoopController"
+        reference = "sfl_brain.modules.controllers.open_loop:OpenLoopController"
         self.proc = spawn_host(controller_spec(run_id, reference, endpoint, cpus))
         wait_alive(session, bus.alive_key(run_id, "controller"))
         self.link = BusLink(session, run_id, "body", "controller", 10.0, spin)

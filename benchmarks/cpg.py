@@ -22,8 +22,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import stats  # noqa: E402
 from planar import REQUEST  # noqa: E402  (the planar benchmark's trial: the same stand-in physics)
 
-from bodies.planar_biped import PlanarBiped  # noqa: E402
-from modules.cpg import CPGNetwork, load_circuit  # noqa: E402
+from sfl_brain.bodies.planar_biped import PlanarBiped  # noqa: E402
+from sfl_brain.modules.cpg import CPGNetwork, load_circuit  # noqa: E402
 
 
 def cpg(name: str) -> tuple[CPGNetwork, np.ndarray]:

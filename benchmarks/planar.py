@@ -28,8 +28,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import controller_spec, spawn_host, wait_alive  # noqa: E402
 from _planar_before import PlanarBipedBefore  # noqa: E402
 
-from bodies.planar_biped import PlanarBiped  # noqa: E402
-from modules.controllers.reflex import ReflexController  # noqa: E402
+from sfl_brain.bodies.planar_biped import PlanarBiped  # noqa: E402
+from sfl_brain.modules.controllers.reflex import ReflexController  # noqa: E402
 from sfl_brain import bus  # noqa: E402
 from sfl_brain.body import InProcessLink  # noqa: E402
 from sfl_brain.host import request  # noqa: E402
@@ -72,8 +72,8 @@ class Processes:
     them; a trial is a request from here, as the supervisor sends it."""
 
     def __init__(self, session, endpoint, run_id, placed, spin) -> None:
-        controller = controller_spec(run_id, "modules.controllers.reflex:ReflexController", endpoint)
-        body = controller_spec(run_id, "bodies.planar_biped:PlanarBiped", endpoint, placed.get("body"))
+        controller = controller_spec(run_id, "sfl_brain.modules.controllers.reflex:ReflexController", endpoint)
+        body = controller_spec(run_id, "sfl_brain.bodies.planar_biped:PlanarBiped", endpoint, placed.get("body"))
         body.update(instance="body", spec_name="body", routes={SensorFrame.TAG: "controller"}, spin=spin)
         controller["cpus"] = placed.get("controller")
         self.procs = [spawn_host(controller), spawn_host(body)]

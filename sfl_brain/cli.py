@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from . import __version__
 from .scenario import ScenarioError, load
 from .status import EXIT_BAD_INPUT, EXIT_CODES, EXIT_ENVIRONMENT, BadInput, EnvironmentProblem, RunStatus
 
@@ -37,8 +38,24 @@ def _start_or_exit(start):
     epilog="Exit codes: 0 completed, 1 failed, 2 bad input, 3 stalled, 4 environment "
     "(port in use, run folder not writable, disk full, no display), 130 interrupted.",
 )
-def main() -> None:
+@click.version_option(__version__, "--version", prog_name="sfl-brain", message="%(prog)s %(version)s")
+@click.option(
+    "--log-level",
+    type=click.Choice(["DEBUG", "INFO", "WARNING", "ERROR"], case_sensitive=False),
+    default=None,
+    help="log level of the supervisor (stderr; default WARNING) and of every module process (logs/*.log; "
+    "default INFO); also env SFL_LOG_LEVEL",
+)
+def main(log_level: str | None) -> None:
     """sfl-brain: success-failure learning for robots, as processes over Zenoh, recorded in Rerun."""
+    import logging
+    import os
+
+    if log_level:
+        os.environ["SFL_LOG_LEVEL"] = log_level.upper()  # the module processes inherit it
+    logging.basicConfig(
+        level=os.environ.get("SFL_LOG_LEVEL", "WARNING"), format="%(asctime)s sfl %(levelname)s %(message)s"
+    )
 
 
 @main.command()

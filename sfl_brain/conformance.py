@@ -46,7 +46,7 @@ def _replies(cls: type[Module], seed: int) -> list:
     if isinstance(module, Body):
         request = m.TrialRequest(trial_id=0, seed=seed, body_params={}, controller_params={}, log=False)
         if module.COMMANDS:
-            from modules.controllers.open_loop import OpenLoopController
+            from sfl_brain.modules.controllers.open_loop import OpenLoopController
 
             module.params = module.Params(**{**module.params.model_dump(), "duration": 0.2})
             module.link = InProcessLink(OpenLoopController())

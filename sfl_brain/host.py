@@ -590,7 +590,7 @@ def serve(spec: dict, *, on_sigint: bool = False, stop_event: threading.Event | 
     """Host ``spec`` until SIGTERM, the parent's end (stdin closes, unless ``watch_stdin`` is false),
     or ``stop_event``; ``on_sigint`` also stops on Ctrl-C (``sfl worker``). Returns an exit code."""
     logging.basicConfig(
-        level=spec.get("log_level", "INFO"),
+        level=spec.get("log_level") or os.environ.get("SFL_LOG_LEVEL", "INFO"),
         format=f"%(asctime)s {spec['instance']} %(levelname)s %(message)s",
         stream=sys.stderr,
     )

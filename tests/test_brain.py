@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from modules.acc import ACC
-from modules.ofc import OFC
-from modules.som import SelfOrganisingMap, SOMParams
-from modules.vigilance import Vigilance
+from sfl_brain.modules.acc import ACC
+from sfl_brain.modules.ofc import OFC
+from sfl_brain.modules.som import SelfOrganisingMap, SOMParams
+from sfl_brain.modules.vigilance import Vigilance
 from sfl_brain import messages as m
 
 

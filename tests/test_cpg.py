@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import yaml
 
-from modules.cpg import CPGNetwork, apply_overrides, load_circuit, validate_circuit
-from modules.cpg.circuit import CIRCUITS, read_circuit_data
-from modules.cpg.patterns import (
+from sfl_brain.modules.cpg import CPGNetwork, apply_overrides, load_circuit, validate_circuit
+from sfl_brain.modules.cpg.circuit import CIRCUITS, read_circuit_data
+from sfl_brain.modules.cpg.patterns import (
     ALMOST_OSCILLATOR,
     KICK_DURATION,
     OSCILLATOR,

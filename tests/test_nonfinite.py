@@ -295,8 +295,8 @@ NAN_MODULES = textwrap.dedent('''
 
     import numpy as np
 
-    from bodies.planar_biped import PlanarBiped
-    from modules.controllers.open_loop import OpenLoopController
+    from sfl_brain.bodies.planar_biped import PlanarBiped
+    from sfl_brain.modules.controllers.open_loop import OpenLoopController
     from sfl_brain.messages import Grade, Rejected, Reward, Threshold, TrialDone, VigilanceStart
     from sfl_brain.module import Module, on
 

@@ -4,8 +4,8 @@ import json
 
 import numpy as np
 
-from bodies.planar_biped import PlanarBiped
-from modules.controllers.reflex import ReflexController, sensor_neuron
+from sfl_brain.bodies.planar_biped import PlanarBiped
+from sfl_brain.modules.controllers.reflex import ReflexController, sensor_neuron
 from sfl_brain.body import InProcessLink
 from sfl_brain.local import run_local
 from sfl_brain.messages import TrialRequest
@@ -170,7 +170,7 @@ def test_learning_run_end_to_end_with_processes(tmp_path):
 
 def test_exploit_walks_with_the_parameters_of_the_given_maps(tmp_path):
     """The exploit protocol restores the ACC from protocol.maps and switches its success neurons."""
-    from modules.acc import ACC
+    from sfl_brain.modules.acc import ACC
 
     def maps_with(alpha_unit, theta_unit, path):
         acc = ACC(ACC.Params(shape=(5, 5, 5), dim=3), seed=0)
@@ -262,7 +262,7 @@ def test_a_controller_step_may_return_a_list_and_still_sends_a_float64_vector():
 SLOW_ONCE = '''
 import time
 
-from modules.controllers.reflex import ReflexController
+from sfl_brain.modules.controllers.reflex import ReflexController
 
 
 class SlowOnce(ReflexController):

@@ -29,7 +29,7 @@ def errors(write_scenario, text):
 
 
 def test_shipped_scenarios_are_valid(tmp_path):
-    from modules.acc import ACC
+    from sfl_brain.modules.acc import ACC
 
     maps = tmp_path / "acc.npz"  # exploit scenarios read the maps of a learn run: give them some
     ACC(ACC.Params(shape=(5, 5, 5), dim=3), seed=0).checkpoint(maps)

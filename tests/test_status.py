@@ -253,3 +253,19 @@ def test_a_relative_run_folder_keeps_its_maps(tmp_path):
     done = sfl("run", str(ANALYTIC), "--set", "protocol.trials=5", "--out", "runs/rel", "--quiet", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "runs" / "rel" / "acc.npz").exists()
+
+
+def test_version_and_installed_names(tmp_path):
+    """`sfl --version` names the installed version; the brain modules and bodies install under
+    sfl_brain (no top-level `modules` / `bodies` of ours in site-packages)."""
+    import sfl_brain
+
+    done = subprocess.run(["sfl", "--version"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and done.stdout.strip() == f"sfl-brain {sfl_brain.__version__}"
+    probe = (
+        "import importlib.util as u, sfl_brain.modules.acc, sfl_brain.bodies.planar_biped;"
+        "print(u.find_spec('modules'), u.find_spec('bodies'))"
+    )
+    done = subprocess.run([sys.executable, "-c", probe], cwd=tmp_path, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["None", "None"]

@@ -225,7 +225,7 @@ def test_seal_refuses_what_another_secret_signed():
     ],
 )
 def test_the_acc_writes_its_maps_only_inside_its_run_folder(tmp_path, path, ok):
-    from modules.acc import ACC
+    from sfl_brain.modules.acc import ACC
 
     run_dir = tmp_path / "run"
     (run_dir / "maps").mkdir(parents=True)

@@ -34,8 +34,8 @@ import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
-from modules.cpg import CPGNetwork, load_circuit  # noqa: E402
-from modules.cpg.patterns import (  # noqa: E402
+from sfl_brain.modules.cpg import CPGNetwork, load_circuit  # noqa: E402
+from sfl_brain.modules.cpg.patterns import (  # noqa: E402
     ALMOST_OSCILLATOR,
     KICK_DURATION,
     OSCILLATOR,

@@ -1,0 +1,12 @@
+"""sfl-brain: success-failure learning (J. Nassour's thesis) as processes over Zenoh, recorded in Rerun.
+
+The runtime lives here; the brain modules and bodies install as :mod:`sfl_brain.modules` and
+:mod:`sfl_brain.bodies` (the folders ``modules/`` and ``bodies/`` of a checkout).
+"""
+
+from importlib.metadata import PackageNotFoundError, version
+
+try:
+    __version__ = version("sfl-brain")
+except PackageNotFoundError:  # a checkout that was never installed
+    __version__ = "0+unknown"
