@@ -39,8 +39,8 @@ import zenoh
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import controller_spec, spawn_host, stats, wait_alive  # noqa: E402
-
 from sfl_brain.modules.controllers.open_loop import OpenLoopController  # noqa: E402
+
 from sfl_brain import bus  # noqa: E402
 from sfl_brain.body import InProcessLink  # noqa: E402
 from sfl_brain.host import BusLink  # noqa: E402

@@ -3,9 +3,9 @@
 import json
 
 import numpy as np
-
 from sfl_brain.bodies.planar_biped import PlanarBiped
 from sfl_brain.modules.controllers.reflex import ReflexController, sensor_neuron
+
 from sfl_brain.body import InProcessLink
 from sfl_brain.local import run_local
 from sfl_brain.messages import TrialRequest
