@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
 from sfl_brain.bodies.planar_biped import FOOT_R, GROUND_R, PlanarBiped
 
 

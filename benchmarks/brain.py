@@ -15,10 +15,10 @@ import time
 from pathlib import Path
 
 import numpy as np
-from sfl_brain.modules.acc import ACC
 
 from sfl_brain.local import run_local
 from sfl_brain.messages import Evaluate
+from sfl_brain.modules.acc import ACC
 from sfl_brain.run import run
 from sfl_brain.scenario import load
 

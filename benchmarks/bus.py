@@ -39,12 +39,12 @@ import zenoh
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import controller_spec, spawn_host, stats, wait_alive  # noqa: E402
-from sfl_brain.modules.controllers.open_loop import OpenLoopController  # noqa: E402
 
 from sfl_brain import bus  # noqa: E402
 from sfl_brain.body import InProcessLink  # noqa: E402
 from sfl_brain.host import BusLink  # noqa: E402
 from sfl_brain.messages import ControllerReset, SensorFrame, decode, encode  # noqa: E402
+from sfl_brain.modules.controllers.open_loop import OpenLoopController  # noqa: E402
 from sfl_brain.placement import assign, pin, usable_cpus  # noqa: E402
 
 # every pong: placed (argv[2], JSON cores or null), then a session that connects to the ping (argv[1])
@@ -84,7 +84,7 @@ PONG_TYPED = textwrap.dedent("""
     from sfl_brain.modules.controllers.open_loop import OpenLoopController
     controller = OpenLoopController()
     controller.handle(ControllerReset(trial_id=0, seed=0, params={}, sensors=["s"] * 8,
-                                      commands=list(controller.COMMANDS)))
+                                      commands=list(controller.WRITES)))
     sub = s.declare_subscriber("bench/typed/ping", zenoh.handlers.RingChannel(64))
     pub = s.declare_publisher("bench/typed/pong")
     tok = s.liveliness().declare_token("bench/typed/pong")

@@ -21,6 +21,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import stats  # noqa: E402
 from planar import REQUEST  # noqa: E402  (the planar benchmark's trial: the same stand-in physics)
+
 from sfl_brain.bodies.planar_biped import PlanarBiped  # noqa: E402
 from sfl_brain.modules.cpg import CPGNetwork, load_circuit  # noqa: E402
 

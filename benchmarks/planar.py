@@ -27,13 +27,13 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import controller_spec, spawn_host, wait_alive  # noqa: E402
 from _planar_before import PlanarBipedBefore  # noqa: E402
-from sfl_brain.bodies.planar_biped import PlanarBiped  # noqa: E402
-from sfl_brain.modules.controllers.reflex import ReflexController  # noqa: E402
 
 from sfl_brain import bus  # noqa: E402
+from sfl_brain.bodies.planar_biped import PlanarBiped  # noqa: E402
 from sfl_brain.body import InProcessLink  # noqa: E402
 from sfl_brain.host import request  # noqa: E402
 from sfl_brain.messages import SensorFrame, TrialRequest  # noqa: E402
+from sfl_brain.modules.controllers.reflex import ReflexController  # noqa: E402
 from sfl_brain.placement import assign, usable_cpus  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -37,6 +37,7 @@ from pydantic import Field
 
 from sfl_brain.body import Body, BodyParams
 from sfl_brain.messages import TrialRequest
+from sfl_brain.signals import Signal
 
 THIGH, SHANK, FOOT_R = 0.142, 0.125, 0.02
 GROUND_R = 0.01  # ground segments' radius: the surface is this far above the profile
@@ -50,8 +51,24 @@ _WALKER_COLORS = np.array([(90, 90, 90), (40, 110, 220), (230, 140, 30)], dtype=
 
 _TORQUE = pymunk.batch.BodyFields.TORQUE
 
-SENSORS = ("hip_l", "hip_r", "knee_l", "knee_r", "contact_l", "contact_r", "slope", "pitch")
-COMMANDS = ("v_hip_l", "v_hip_r", "v_knee_l", "v_knee_r")
+_HIP = (math.pi / 2 + HIP_LIMITS[0], math.pi / 2 + HIP_LIMITS[1])  # RunBot's convention: 90 deg = along the trunk
+MAX_VOLTAGE = 12.0  # commands are clipped to +-this
+SENSORS = (
+    Signal("hip_l", "rad", *_HIP, "left hip: 90 deg = thigh along the trunk, larger = swung forward"),
+    Signal("hip_r", "rad", *_HIP, "right hip, as hip_l"),
+    Signal("knee_l", "rad", *KNEE_LIMITS, "left knee: 0 = straight, negative = flexed"),
+    Signal("knee_r", "rad", *KNEE_LIMITS, "right knee, as knee_l"),
+    Signal("contact_l", "", 0.0, 1.0, "left foot on the ground (1) or not (0), with hysteresis"),
+    Signal("contact_r", "", 0.0, 1.0, "right foot on the ground"),
+    Signal("slope", "rad", -math.radians(45), math.radians(45), "ground slope under the hip, uphill positive"),
+    Signal("pitch", "rad", -math.pi, math.pi, "trunk pitch, counter-clockwise positive (it walks toward +x)"),
+)
+COMMANDS = (
+    Signal("v_hip_l", "V", -MAX_VOLTAGE, MAX_VOLTAGE, "left hip motor voltage (3.6), clipped"),
+    Signal("v_hip_r", "V", -MAX_VOLTAGE, MAX_VOLTAGE, "right hip motor voltage"),
+    Signal("v_knee_l", "V", -MAX_VOLTAGE, MAX_VOLTAGE, "left knee motor voltage"),
+    Signal("v_knee_r", "V", -MAX_VOLTAGE, MAX_VOLTAGE, "right knee motor voltage"),
+)
 
 
 #: steepest ground a slope or a terrain piece may have, degrees either way
@@ -318,7 +335,7 @@ class PlanarBiped(Body):
     # ------------------------------------------------------------------ acting
     def actuate(self, command: np.ndarray) -> None:
         p = self.params
-        voltage = np.clip(np.asarray(command, dtype=float), -12.0, 12.0)
+        voltage = np.clip(np.asarray(command, dtype=float), -MAX_VOLTAGE, MAX_VOLTAGE)
         h = p.control_dt / p.substeps
         # tau = K V on each joint, + on its child link and - on its parent (the -K k_e omega part is
         # the damper added at build time); the sums in the order a link's joints add them
@@ -394,9 +411,9 @@ class PlanarBiped(Body):
             rr.TimeColumn("sim_time", duration=times),
             rr.TimeColumn("trial", sequence=np.full(n, trial_id)),
         ]
-        for j, name in enumerate(SENSORS[:4]):
+        for j, name in enumerate(s.name for s in SENSORS[:4]):
             rec.send_columns(f"{self.entity}/joints/{name}", idx, rr.Scalars.columns(scalars=np.degrees(trace[:, j])))
-        for j, name in enumerate(COMMANDS):  # motor voltages (3.6): the motor neurons' net output
+        for j, name in enumerate(s.name for s in COMMANDS):  # motor voltages (3.6): the motor neurons' net output
             rec.send_columns(f"{self.entity}/motors/{name}", idx, rr.Scalars.columns(scalars=trace[:, 8 + j]))
         rec.send_columns(f"{self.entity}/contacts/left", idx, rr.Scalars.columns(scalars=trace[:, 4]))
         rec.send_columns(f"{self.entity}/contacts/right", idx, rr.Scalars.columns(scalars=trace[:, 5]))

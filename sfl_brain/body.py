@@ -38,6 +38,7 @@ from .messages import (
     message_name,
 )
 from .module import Module, ModuleParams, on
+from .signals import Signal, WiringError, names, wiring
 
 
 class ControllerLink(Protocol):
@@ -84,10 +85,11 @@ class Body(Module):
     """Base of simulated bodies. Subclasses fill the five trial hooks."""
 
     Params: ClassVar[type[BodyParams]] = BodyParams
-    #: names of the sensor values of one tick, in order; empty for bodies that need no controller
-    SENSORS: ClassVar[tuple[str, ...]] = ()
-    #: names of the command values of one tick, in order
-    COMMANDS: ClassVar[tuple[str, ...]] = ()
+    #: the sensor values of one tick, in the order :meth:`sense` lays them out (name, unit, bounds,
+    #: meaning); empty for bodies that need no controller
+    SENSORS: ClassVar[tuple[Signal, ...]] = ()
+    #: the command values of one tick, in the order :meth:`actuate` takes them
+    COMMANDS: ClassVar[tuple[Signal, ...]] = ()
     #: parameters a trial request may set on the body (checked by ``sfl check``)
     TRIAL_PARAMS: ClassVar[tuple[str, ...]] = ()
 
@@ -132,7 +134,7 @@ class Body(Module):
         where, value = bad
         i = where[1:-1]
         if i.isdigit() and int(i) < len(self.SENSORS):
-            where += f" ({self.SENSORS[int(i)]})"
+            where += f" ({names(self.SENSORS)[int(i)]})"
         raise NonFiniteError(
             message_name(SensorFrame), "values" + where, value, self, "sensed", {"trial_id": trial_id, "tick": tick}
         )
@@ -159,8 +161,8 @@ class Body(Module):
                     trial_id=request.trial_id,
                     seed=request.seed,
                     params=request.controller_params,
-                    sensors=list(self.SENSORS),
-                    commands=list(self.COMMANDS),
+                    sensors=list(names(self.SENSORS)),
+                    commands=list(names(self.COMMANDS)),
                     log=self.logging,
                     t0=request.trial_id * self.params.duration,
                     dt=self.params.control_dt,
@@ -206,12 +208,20 @@ class Body(Module):
 
 
 class Controller(Module):
-    """Base of low-level controllers: one tick of sensors in, one tick of commands out."""
+    """Base of low-level controllers: one tick of sensors in, one tick of commands out.
 
-    #: sensors this controller reads; the body must provide each of them
-    REQUIRED_SENSORS: ClassVar[tuple[str, ...]] = ()
-    #: commands this controller produces, in its own order
-    COMMANDS: ClassVar[tuple[str, ...]] = ()
+    A controller names the signals it reads and writes; its body declares them (units, bounds).
+    They are matched by name (:func:`sfl_brain.signals.wiring`), once per body layout: ``step``
+    gets the sensors in ``READS`` order whatever the body's order, and its ``WRITES`` values are
+    put in the body's command order. A body with sensors the controller does not read is fine; a
+    sensor it lacks, or a command that one end has and the other has not, is an error that names
+    both ends (``sfl check`` finds it before anything starts).
+    """
+
+    #: names of the sensors ``step`` reads, in the order it takes them
+    READS: ClassVar[tuple[str, ...]] = ()
+    #: names of the commands ``step`` returns, in its own order (the body's must be the same set)
+    WRITES: ClassVar[tuple[str, ...]] = ()
     #: learnt parameters a trial may set (checked by ``sfl check``)
     TRIAL_PARAMS: ClassVar[tuple[str, ...]] = ()
     #: names of the neuron activities :meth:`neurons` returns (logged to Rerun on logged trials)
@@ -227,17 +237,33 @@ class Controller(Module):
         return np.empty(0)
 
     def step(self, sensors: np.ndarray) -> np.ndarray:
-        """One control tick: sensor values (``REQUIRED_SENSORS`` order) -> ``COMMANDS`` values."""
+        """One control tick: sensor values (``READS`` order) -> command values (``WRITES`` order)."""
         raise NotImplementedError
+
+    _wired_for: tuple | None = None
+    _read_index: np.ndarray | None = None
+    _write_index: np.ndarray | None = None
+
+    @classmethod
+    def wire(cls, sensors, commands, body: str = "the body") -> tuple[np.ndarray | None, np.ndarray | None]:
+        """Index maps (None: the same order) from ``body``'s ``sensors`` to ``READS`` and from ``WRITES``
+        to its ``commands`` (Signals or names); :class:`WiringError` naming both ends on a mismatch."""
+        me = f"controller `{cls.__name__}`"
+        read = wiring(sensors, cls.READS, provider=body, consumer=me, what="reads sensors")
+        extra = [n for n in cls.WRITES if n not in names(commands)]
+        if extra:
+            raise WiringError(
+                f"{me} writes commands {extra} that {body} does not take; it takes {list(names(commands))}"
+            )
+        write = wiring(cls.WRITES, names(commands), provider=me, consumer=body, what="takes commands")
+        return read, write
 
     @on(ControllerReset)
     def on_controller_reset(self, msg: ControllerReset) -> Ack:
-        missing = [s for s in self.REQUIRED_SENSORS if s not in msg.sensors]
-        if missing:
-            raise ValueError(f"{type(self).__name__} needs sensors {missing}; body has {msg.sensors}")
-        if list(msg.commands) != list(self.COMMANDS):
-            raise ValueError(f"{type(self).__name__} commands {self.COMMANDS}; body expects {msg.commands}")
-        self._sensor_index = np.array([msg.sensors.index(s) for s in self.REQUIRED_SENSORS], dtype=int)
+        layout = (tuple(msg.sensors), tuple(msg.commands))
+        if layout != self._wired_for:  # once per body layout, not per trial
+            self._read_index, self._write_index = self.wire(*layout)
+            self._wired_for = layout
         self._trial_id = msg.trial_id
         self.flush_neurons()  # the previous logged trial, if any
         self._neuron_log = ([], msg.trial_id, msg.t0, msg.dt) if msg.log and self.NEURONS and self.recording else None
@@ -246,12 +272,15 @@ class Controller(Module):
 
     @on(SensorFrame)
     def on_sensor_frame(self, frame: SensorFrame) -> MotorCommand:
-        values = self.step(frame.values[self._sensor_index])
+        read = self._read_index
+        values = self.step(frame.values if read is None else frame.values[read])
         if self._neuron_log is not None:
             self._neuron_log[0].append(self.neurons())
         if type(values) is not np.ndarray or values.dtype != _F8:
             # a step that returns a list or float32 still sends a float64 vector (the packed layout)
             values = np.asarray(values, dtype=_F8)
+        if self._write_index is not None:
+            values = values[self._write_index]
         return MotorCommand(trial_id=frame.trial_id, tick=frame.tick, values=values)
 
     def flush_neurons(self) -> None:

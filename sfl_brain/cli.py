@@ -200,23 +200,66 @@ def study(scenario, vary, seeds, overrides, out, quiet) -> None:
 
 
 @main.command("list")
-def list_command() -> None:
-    """Show the registered module and body implementations."""
+@click.argument("name", required=False)
+def list_command(name: str | None) -> None:
+    """Show the registered module and body implementations, or one of them in full (NAME: a
+    registered name, package.module:Class or file.py:Class): its parameters and, for a body, its
+    sensor and command signals; for a controller, what it reads and writes."""
     from .body import Body, Controller
-    from .registry import registered, resolve
+    from .registry import ImplError, registered, resolve
 
-    rows = []
-    for name, reference in sorted(registered().items()):
+    if name is not None:
         try:
-            cls, _ = resolve(name)
+            cls, reference = resolve(name, Path.cwd())
+        except ImplError as exc:
+            hint = f" (did you mean `{exc.suggestion}`?)" if exc.suggestion else ""
+            click.echo(f"sfl: {exc}{hint}; registered: {', '.join(sorted(registered()))}", err=True)
+            sys.exit(EXIT_BAD_INPUT)
+        for line in _describe(cls, reference):
+            click.echo(line)
+        return
+    rows = []
+    for key, reference in sorted(registered().items()):
+        try:
+            cls, _ = resolve(key)
         except Exception as exc:  # a broken third-party entry point must not hide the others
-            rows.append((name, "?", f"cannot load {reference}: {exc}"))
+            rows.append((key, "?", f"cannot load {reference}: {exc}"))
             continue
         kind = "body" if issubclass(cls, Body) else "controller" if issubclass(cls, Controller) else "brain"
-        rows.append((name, kind, cls.describe()))
+        rows.append((key, kind, cls.describe()))
     width = max(len(r[0]) for r in rows) if rows else 0
-    for name, kind, text in rows:
-        click.echo(f"{name:<{width}}  {kind:<10}  {text}")
+    for key, kind, text in rows:
+        click.echo(f"{key:<{width}}  {kind:<10}  {text}")
+    click.echo("\nsfl list NAME shows one in full (parameters, signals).")
+
+
+def _describe(cls, reference: str) -> list[str]:
+    """The lines of ``sfl list NAME``."""
+    from .body import Body, Controller
+    from .signals import table
+
+    lines = [f"{cls.__name__} ({reference}): {cls.describe()}", "", "parameters (params:)"]
+    for key, field in cls.Params.model_fields.items():
+        default = field.get_default(call_default_factory=True)
+        lines.append(f"  {key} = {default!r}" + (f"  {field.description}" if field.description else ""))
+    if issubclass(cls, Body):
+        if cls.SENSORS:
+            lines += ["", *table(cls.SENSORS, "sensors (one tick, in this order)")]
+        if cls.COMMANDS:
+            lines += ["", *table(cls.COMMANDS, "commands (one tick, in this order)")]
+        if not cls.COMMANDS:
+            lines += ["", "takes no commands: it needs no controller"]
+    if issubclass(cls, Controller):
+        lines += [
+            "",
+            f"reads sensors:  {', '.join(cls.READS) or '(none)'}",
+            f"writes commands: {', '.join(cls.WRITES)}",
+        ]
+        if cls.NEURONS:
+            lines.append(f"neurons shown on logged trials: {len(cls.NEURONS)} ({', '.join(cls.NEURONS[:4])}, ...)")
+    if getattr(cls, "TRIAL_PARAMS", ()):
+        lines += ["", f"trial parameters (space targets, conditions): {', '.join(cls.TRIAL_PARAMS)}"]
+    return lines
 
 
 @main.command()

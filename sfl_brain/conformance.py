@@ -3,7 +3,11 @@
 ``check_module(cls)`` verifies the contract: a frozen, validated parameter schema whose
 defaults construct; at least one handler, each for a registered message type; ``reset(seed)``
 is deterministic (same seed, same replies to the same messages); messages survive the codec.
-It raises ``AssertionError`` naming the module and what failed.
+A body declares its signals as :class:`~sfl_brain.signals.Signal` s with unique names, senses
+as many values as it declares, each within its declared bounds, during a short trial driven by
+a controller that holds every command at zero; a controller names what it reads and writes
+(unique names) and returns one value per command. It raises ``AssertionError`` naming the module
+and what failed. It imports no module implementation of its own.
 """
 
 from __future__ import annotations
@@ -14,6 +18,7 @@ from pydantic import ValidationError
 from . import messages as m
 from .body import Body, Controller, InProcessLink
 from .module import Module
+from .signals import Signal, names
 
 
 def sample_messages(module: Module) -> list[m.Message]:
@@ -41,33 +46,85 @@ def sample_messages(module: Module) -> list[m.Message]:
     return out
 
 
+class _HoldStill(Controller):
+    """The conformance check's own controller: every command at zero, whatever the body."""
+
+    READS = ()
+
+    def configure(self, params: dict, seed: int) -> None:
+        pass
+
+    def step(self, sensors: np.ndarray) -> np.ndarray:
+        return np.zeros(len(self.WRITES))
+
+
+class _CheckedLink(InProcessLink):
+    """Checks each tick's sensor values against the body's declared signals."""
+
+    def __init__(self, body: type[Body]) -> None:
+        hold = type("HoldStill", (_HoldStill,), {"WRITES": names(body.COMMANDS)})
+        super().__init__(hold())
+        self.body = body
+        self.ticks = 0
+
+    def step(self, frame: m.SensorFrame) -> m.MotorCommand:
+        cls, values = self.body, frame.values
+        assert len(values) == len(cls.SENSORS), (
+            f"{cls.__name__}: sensed {len(values)} values, declares {len(cls.SENSORS)}"
+        )
+        for signal, value in zip(cls.SENSORS, values.tolist(), strict=True):
+            slack = 0.01 * (signal.high - signal.low)  # joint stops and contacts are soft in physics
+            assert signal.low - slack <= value <= signal.high + slack, (
+                f"{cls.__name__}: sensor {signal.name} = {value:g} {signal.unit} at tick {frame.tick}, "
+                f"outside its declared [{signal.low:g}, {signal.high:g}]"
+            )
+        self.ticks += 1
+        return super().step(frame)
+
+
 def _replies(cls: type[Module], seed: int) -> list:
     module = cls(cls.Params(), seed=seed)
     if isinstance(module, Body):
         request = m.TrialRequest(trial_id=0, seed=seed, body_params={}, controller_params={}, log=False)
         if module.COMMANDS:
-            from sfl_brain.modules.controllers.open_loop import OpenLoopController
-
-            module.params = module.Params(**{**module.params.model_dump(), "duration": 0.2})
-            module.link = InProcessLink(OpenLoopController())
+            if "duration" in module.Params.model_fields:
+                module.params = module.Params(**{**module.params.model_dump(), "duration": 0.2})
+            module.link = link = _CheckedLink(cls)
         result = m.decode(m.encode(module.handle(request)))
         module.close()
+        if module.COMMANDS:
+            assert link.ticks > 0, f"{cls.__name__}: a trial with a controller ran no tick"
         return [result]
     if isinstance(module, Controller):
         module.handle(
-            m.ControllerReset(
-                trial_id=0,
-                seed=seed,
-                params={},
-                sensors=list(cls.REQUIRED_SENSORS),
-                commands=list(cls.COMMANDS),
-            )
+            m.ControllerReset(trial_id=0, seed=seed, params={}, sensors=list(cls.READS), commands=list(cls.WRITES))
         )
-        frame = m.SensorFrame(trial_id=0, tick=0, values=np.zeros(len(cls.REQUIRED_SENSORS)))
-        reply = module.handle(frame)
-        assert len(reply.values) == len(cls.COMMANDS), f"{cls.__name__}: {len(reply.values)} commands"
-        return [reply]
+        replies = []
+        for tick in range(3):
+            frame = m.SensorFrame(trial_id=0, tick=tick, values=np.zeros(len(cls.READS)))
+            reply = m.decode(m.encode(module.handle(frame)))
+            assert len(reply.values) == len(cls.WRITES), (
+                f"{cls.__name__}: returned {len(reply.values)} commands for {len(cls.WRITES)} WRITES"
+            )
+            replies.append(reply)
+        return replies
     return [m.decode(m.encode(module.handle(msg))) for msg in sample_messages(module)]
+
+
+def _check_signals(cls: type[Module]) -> None:
+    name = cls.__name__
+    if issubclass(cls, Body):
+        for kind in ("SENSORS", "COMMANDS"):
+            declared = getattr(cls, kind)
+            assert all(isinstance(s, Signal) for s in declared), f"{name}.{kind} must be Signals (name, unit, bounds)"
+            assert len(set(names(declared))) == len(declared), f"{name}.{kind}: duplicate names {names(declared)}"
+        assert not cls.COMMANDS or cls.SENSORS, f"{name}: a body that takes commands declares its SENSORS"
+    if issubclass(cls, Controller):
+        assert cls.WRITES, f"{name}: a controller declares the commands it WRITES"
+        for kind in ("READS", "WRITES", "NEURONS"):
+            declared = getattr(cls, kind)
+            assert all(isinstance(s, str) for s in declared), f"{name}.{kind} must be names"
+            assert len(set(declared)) == len(declared), f"{name}.{kind}: duplicate names"
 
 
 def _same(a, b) -> bool:
@@ -93,12 +150,9 @@ def check_module(cls: type[Module]) -> None:
     tags = m.registered()
     for message_type in cls.handles:
         assert tags.get(message_type.TAG) is message_type, f"{name} handles unregistered {message_type}"
-    if issubclass(cls, Body):
-        assert len(set(cls.SENSORS)) == len(cls.SENSORS), f"{name}: duplicate sensor names"
-    if issubclass(cls, Controller):
-        assert cls.COMMANDS, f"{name}: a controller declares its COMMANDS"
-    first, second, other = _replies(cls, 3), _replies(cls, 3), _replies(cls, 4)
+    _check_signals(cls)
+    first, second = _replies(cls, 3), _replies(cls, 3)
     assert len(first) == len(second)
     for a, b in zip(first, second, strict=True):
         assert _same(a, b), f"{name}: same seed gave different replies: {a} vs {b}"
-    assert other is not None
+    _replies(cls, 4)  # another seed runs too

@@ -171,9 +171,7 @@ class Conductor:
         return every > 0 and trial_id % every == 0
 
     def physical_row(self, unit: np.ndarray) -> dict:
-        return {
-            a.name: float(a.low + u * (a.high - a.low)) for a, u in zip(self.plan.scenario.space, unit, strict=True)
-        }
+        return {a.name: a.to_physical(u) for a, u in zip(self.plan.scenario.space, unit, strict=True)}
 
 
 def run_learn(c: Conductor) -> dict:
@@ -359,9 +357,9 @@ def run_exploit(c: Conductor) -> dict:
     table: m.ExploitTable = c.call(m.Exploit(axis=axis, conditions=conditions))
     # the controller receives the whole table and switches neurons by the sensed condition
     physical_table = {
-        "condition": [float(spec.low + u * (spec.high - spec.low)) for u in table.conditions],
+        "condition": spec.to_physical(table.conditions).tolist(),
         **{
-            a.target.partition(".")[2]: [float(a.low + w * (a.high - a.low)) for w in table.weights[:, j]]
+            a.target.partition(".")[2]: a.to_physical(table.weights[:, j]).tolist()
             for j, a in enumerate(c.plan.scenario.space)
             if j != axis and a.target.startswith("controller.")
         },

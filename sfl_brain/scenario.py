@@ -37,6 +37,7 @@ from . import messages as m
 from .body import Body, Controller
 from .module import Module
 from .registry import ImplError, nearest, resolve
+from .signals import WiringError
 
 
 class Strict(BaseModel):
@@ -61,6 +62,13 @@ class Axis(Strict):
         if not self.high > self.low:
             raise ValueError(f"high ({self.high}) must be greater than low ({self.low})")
         return self
+
+    def to_physical(self, u):
+        """The physical value(s), in ``unit``, of unit coordinate(s) ``u`` in [0, 1]: the one place
+        a learnt or drawn point becomes a parameter (trial requests, records, exploit tables)."""
+        if np.ndim(u) == 0:
+            return float(self.low + float(u) * (self.high - self.low))
+        return self.low + np.asarray(u, dtype=float) * (self.high - self.low)
 
 
 class ModuleSpec(Strict):
@@ -392,7 +400,7 @@ class Plan:
             out[owner][param] = value
         for u, axis in zip(unit, self.scenario.space, strict=True):
             owner, _, param = axis.target.partition(".")
-            out[owner][param] = float(axis.low + float(u) * (axis.high - axis.low))
+            out[owner][param] = axis.to_physical(u)
         return out
 
 
@@ -892,24 +900,10 @@ def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
                     )
                 )
             else:
-                missing = [s for s in ctrl_cls.REQUIRED_SENSORS if s not in body_cls.SENSORS]
-                if missing:
-                    problems.append(
-                        Problem(
-                            f"modules.{controller_name}",
-                            f"controller `{ctrl_cls.__name__}` reads sensors {missing} that body "
-                            f"`{body_name}` ({body_cls.__name__}) does not provide; "
-                            f"it provides {list(body_cls.SENSORS)}",
-                        )
-                    )
-                if tuple(ctrl_cls.COMMANDS) != tuple(body_cls.COMMANDS):
-                    problems.append(
-                        Problem(
-                            f"modules.{controller_name}",
-                            f"controller `{ctrl_cls.__name__}` commands {list(ctrl_cls.COMMANDS)}; body "
-                            f"`{body_name}` expects {list(body_cls.COMMANDS)}",
-                        )
-                    )
+                try:
+                    ctrl_cls.wire(body_cls.SENSORS, body_cls.COMMANDS, body=f"body `{body_name}` ({body_cls.__name__})")
+                except WiringError as exc:
+                    problems.append(Problem(f"modules.{controller_name}", str(exc)))
 
     # --- targets of axes and conditions exist ----------------------------------------------------
     owners = {

@@ -61,7 +61,8 @@ def wiring(
     have = names(provided)
     missing = [n for n in wanted if n not in have]
     if missing:
-        hints = [f"{n} (did you mean `{nearest(n, have)}`?)" if nearest(n, have) else n for n in missing]
+        spare = [n for n in have if n not in wanted]  # a name already matched is no hint
+        hints = [f"{n} (did you mean `{nearest(n, spare)}`?)" if nearest(n, spare) else n for n in missing]
         raise WiringError(f"{consumer} {what} {', '.join(hints)} that {provider} does not have; it has {list(have)}")
     if tuple(wanted) == have:
         return None  # the same order: no reordering on the tick path

@@ -5,12 +5,12 @@ import math
 import numpy as np
 import pytest
 from pydantic import ValidationError
+
+from sfl_brain import messages as m
 from sfl_brain.modules.acc import ACC
 from sfl_brain.modules.ofc import OFC
 from sfl_brain.modules.som import SelfOrganisingMap, SOMParams
 from sfl_brain.modules.vigilance import Vigilance
-
-from sfl_brain import messages as m
 
 
 def som(seed=0, **kw):

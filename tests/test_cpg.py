@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+
 from sfl_brain.modules.cpg import CPGNetwork, apply_overrides, load_circuit, validate_circuit
 from sfl_brain.modules.cpg.circuit import CIRCUITS, read_circuit_data
 from sfl_brain.modules.cpg.patterns import (
@@ -21,7 +22,6 @@ from sfl_brain.modules.cpg.patterns import (
     pattern_space_point,
     simulate_one_joint,
 )
-
 from sfl_brain.scenario import ScenarioError
 
 DT = 0.01  # control tick, s

@@ -15,6 +15,7 @@ import pytest
 from sfl_brain import messages as m
 from sfl_brain.body import Body, Controller, InProcessLink
 from sfl_brain.module import Module, on
+from sfl_brain.signals import Signal
 
 from .conftest import sfl_run
 
@@ -175,8 +176,12 @@ def test_run_local_stops_at_the_first_non_finite_reply(tmp_path):
 class Tiny(Body):
     """Three sensors, one command, ``ticks`` ticks; ``bad`` puts a value into a sensor or the outcome."""
 
-    SENSORS = ("x", "v", "contact")
-    COMMANDS = ("u",)
+    SENSORS = (
+        Signal("x", "m", -10, 10, "position"),
+        Signal("v", "m/s", -10, 10, "speed"),
+        Signal("contact", "", 0, 1, "touching"),
+    )
+    COMMANDS = (Signal("u", "N", -1, 1, "push"),)
 
     def __init__(self, bad: tuple = (), ticks: int = 10) -> None:
         super().__init__()
@@ -209,7 +214,7 @@ class Tiny(Body):
 class Nudge(Controller):
     """Command 0.5, or NaN from tick ``nan_at`` on."""
 
-    COMMANDS = ("u",)
+    WRITES = ("u",)
 
     def __init__(self, nan_at: int = -1) -> None:
         super().__init__()

@@ -3,12 +3,12 @@
 import json
 
 import numpy as np
-from sfl_brain.bodies.planar_biped import PlanarBiped
-from sfl_brain.modules.controllers.reflex import ReflexController, sensor_neuron
 
+from sfl_brain.bodies.planar_biped import PlanarBiped
 from sfl_brain.body import InProcessLink
 from sfl_brain.local import run_local
 from sfl_brain.messages import TrialRequest
+from sfl_brain.modules.controllers.reflex import ReflexController, sensor_neuron
 from sfl_brain.placement import usable_cpus
 from sfl_brain.records import read_records
 from sfl_brain.scenario import load
@@ -102,7 +102,7 @@ def test_vectorised_controller_matches_the_network_neuron_by_neuron():
                 seed=0,
                 params={"alpha_hip": alpha, "theta_hip_max_deg": theta},
                 sensors=sensors,
-                commands=list(fast.COMMANDS),
+                commands=list(fast.WRITES),
             )
         )
         reference = NeuronByNeuron(fast.params, alpha, theta)
@@ -244,7 +244,7 @@ def test_a_controller_step_may_return_a_list_and_still_sends_a_float64_vector():
     from sfl_brain.messages import ControllerReset, SensorFrame, decode, encode
 
     class Listing(Controller):
-        COMMANDS = ("v_hip_l", "v_hip_r")
+        WRITES = ("v_hip_l", "v_hip_r")
 
         def configure(self, params, seed):
             pass
@@ -253,7 +253,7 @@ def test_a_controller_step_may_return_a_list_and_still_sends_a_float64_vector():
             return [1, 2.5]
 
     controller = Listing()
-    controller.handle(ControllerReset(trial_id=0, seed=0, params={}, sensors=["x"], commands=list(Listing.COMMANDS)))
+    controller.handle(ControllerReset(trial_id=0, seed=0, params={}, sensors=["x"], commands=list(Listing.WRITES)))
     command = decode(encode(controller.handle(SensorFrame(trial_id=0, tick=3, values=np.zeros(1)))))
     assert command.tick == 3 and command.values.dtype == np.float64
     np.testing.assert_array_equal(command.values, [1.0, 2.5])

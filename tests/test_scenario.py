@@ -1,5 +1,6 @@
 import textwrap
 
+import numpy as np
 import pytest
 
 from sfl_brain.scenario import ScenarioError, load
@@ -78,12 +79,81 @@ def test_axis_target_must_exist_on_the_body(write_scenario):
     assert "space.1.target: AnalyticBody takes trial parameters ['x', 'y', 'z']; got 'yy'" in text
 
 
-def test_controller_body_mismatch_names_both_ends(write_scenario):
-    text, _ = errors(
-        write_scenario,
-        BASE.replace("body: {impl: analytic}", "body: {impl: planar_biped}\n  controller: {impl: reflex}"),
+MISWIRED = """
+from sfl_brain.body import Controller
+
+
+class Miswired(Controller):
+    READS = {reads}
+    WRITES = {writes}
+    TRIAL_PARAMS = ("alpha_hip", "theta_hip_max_deg")
+
+    def configure(self, params, seed):
+        pass
+
+    def step(self, sensors):
+        return sensors
+"""
+WALKER = """
+name: t
+seed: 1
+protocol: {kind: learn, trials: 5}
+space:
+  - {name: a, target: controller.alpha_hip, low: 0, high: 1}
+  - {name: t, target: controller.theta_hip_max_deg, low: 90, high: 140}
+modules:
+  acc: {impl: acc}
+  vigilance: {impl: vigilance}
+  ofc: {impl: ofc}
+  body: {impl: planar_biped}
+  controller: {impl: miswired.py:Miswired}
+"""
+HIPS_KNEES = ("v_hip_l", "v_hip_r", "v_knee_l", "v_knee_r")
+
+
+def test_a_sensor_the_body_lacks_is_named_with_both_ends(write_scenario):
+    write_scenario(MISWIRED.format(reads=("hip_left", "knee_l"), writes=HIPS_KNEES), "miswired.py")
+    text, _ = errors(write_scenario, WALKER)
+    assert (
+        "modules.controller: controller `Miswired` reads sensors hip_left (did you mean `hip_l`?) that "
+        "body `body` (PlanarBiped) does not have; it has ['hip_l', 'hip_r', 'knee_l'" in text
     )
-    assert "space.0.target: PlanarBiped takes trial parameters" in text
+
+
+def test_a_command_one_end_lacks_is_named_with_both_ends(write_scenario):
+    write_scenario(MISWIRED.format(reads=("hip_l",), writes=HIPS_KNEES[:3]), "miswired.py")
+    text, _ = errors(write_scenario, WALKER)
+    assert (
+        "modules.controller: body `body` (PlanarBiped) takes commands v_knee_r that controller `Miswired` "
+        "does not have; it has ['v_hip_l', 'v_hip_r', 'v_knee_l']" in text
+    )
+    write_scenario(MISWIRED.format(reads=("hip_l",), writes=(*HIPS_KNEES, "v_ankle_l")), "overwired.py")
+    text, _ = errors(write_scenario, WALKER.replace("miswired.py", "overwired.py"))
+    assert "controller `Miswired` writes commands ['v_ankle_l'] that body `body` (PlanarBiped) does not take" in text
+
+
+def test_signals_are_matched_by_name_in_any_order(write_scenario):
+    """The same controller wired to a body that lists its signals in another order sees the same
+    sensors and drives the same joints."""
+    write_scenario(MISWIRED.format(reads=("knee_l", "hip_r"), writes=HIPS_KNEES[::-1]), "reordered.py")
+    load(write_scenario(WALKER.replace("miswired.py", "reordered.py")))  # a valid wiring: sfl check passes
+    from sfl_brain.messages import ControllerReset, SensorFrame
+    from sfl_brain.registry import resolve
+
+    cls, _ = resolve("reordered.py:Miswired", base_dir=write_scenario("", "x.yaml").parent)
+
+    class EchoFour(cls):
+        READS = ("knee_l", "hip_r", "hip_l", "knee_r")
+
+    for sensors in (["hip_l", "hip_r", "knee_l", "knee_r"], ["knee_r", "knee_l", "hip_r", "hip_l", "pitch"]):
+        controller = EchoFour()
+        controller.handle(ControllerReset(trial_id=0, seed=0, params={}, sensors=sensors, commands=list(HIPS_KNEES)))
+        values = {"hip_l": 1.0, "hip_r": 2.0, "knee_l": 3.0, "knee_r": 4.0, "pitch": 9.0}
+        frame = SensorFrame(trial_id=0, tick=0, values=np.array([values[s] for s in sensors]))
+        # step echoes (knee_l, hip_r, hip_l, knee_r) as WRITES (v_knee_r, v_knee_l, v_hip_r, v_hip_l)
+        command = controller.handle(frame)
+        # so v_knee_r = knee_l, v_knee_l = hip_r, v_hip_r = hip_l, v_hip_l = knee_r, in the body's order:
+        assert command.values.tolist() == [4.0, 1.0, 2.0, 3.0]
 
 
 def test_cli_check_exits_2_without_traceback(write_scenario):
@@ -184,3 +254,16 @@ def test_module_params_stay_lists_through_json_for_the_host():
     assert acc.params["shape"] == [5, 6]
     cls, _ = resolve(acc.reference)
     assert cls.Params.model_validate(acc.params).shape == (5, 6)
+
+
+def test_sfl_list_prints_a_body_s_signal_table():
+    done = sfl("list", "planar_biped")
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert any(line.split()[:3] == ["hip_l", "rad", "[0.349066,"] for line in lines)
+    assert any(line.split()[:4] == ["v_knee_r", "V", "[-12,", "12]"] for line in lines)
+    assert "substeps = 10  physics steps per control tick" in done.stdout
+    done = sfl("list", "reflex")
+    assert "reads sensors:  hip_l, hip_r, knee_l, knee_r, contact_l, contact_r, slope" in done.stdout
+    done = sfl("list", "planar_bipd")
+    assert done.returncode == 2 and "did you mean `planar_biped`" in done.stderr and "Traceback" not in done.stderr

@@ -38,11 +38,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 from sfl_brain.bodies.planar_biped import PlanarBiped  # noqa: E402
-from sfl_brain.modules.acc import ACC  # noqa: E402
-from sfl_brain.modules.controllers.reflex import ReflexController  # noqa: E402
-
 from sfl_brain.body import InProcessLink  # noqa: E402
 from sfl_brain.messages import TrialRequest  # noqa: E402
+from sfl_brain.modules.acc import ACC  # noqa: E402
+from sfl_brain.modules.controllers.reflex import ReflexController  # noqa: E402
 from sfl_brain.records import read_records  # noqa: E402
 
 

@@ -21,8 +21,8 @@ class OpenLoopController(Controller):
     """Sinusoidal hip and knee voltages in anti-phase between the legs; ignores the sensors."""
 
     Params = OpenLoopParams
-    REQUIRED_SENSORS = ()
-    COMMANDS = ("v_hip_l", "v_hip_r", "v_knee_l", "v_knee_r")
+    READS = ()
+    WRITES = ("v_hip_l", "v_hip_r", "v_knee_l", "v_knee_r")
     TRIAL_PARAMS = ("amplitude", "frequency")
 
     def configure(self, params: dict, seed: int) -> None:

@@ -85,8 +85,8 @@ class ReflexController(Controller):
     """Reflexive sensor-motor network of §3.4 (eqs. 3.4-3.6, Fig. 3.7); learns alpha_hip, theta_hip_max."""
 
     Params = ReflexParams
-    REQUIRED_SENSORS = SENSORS
-    COMMANDS = ("v_hip_l", "v_hip_r", "v_knee_l", "v_knee_r")
+    READS = SENSORS
+    WRITES = ("v_hip_l", "v_hip_r", "v_knee_l", "v_knee_r")
     TRIAL_PARAMS = ("alpha_hip", "theta_hip_max_deg", "switching_table")
     #: sensor neurons (3.4), motor neurons (3.5) and ground contacts, per leg, logged on logged trials
     NEURONS = tuple(
