@@ -245,24 +245,34 @@ class Controller(Module):
     _write_index: np.ndarray | None = None
 
     @classmethod
-    def wire(cls, sensors, commands, body: str = "the body") -> tuple[np.ndarray | None, np.ndarray | None]:
-        """Index maps (None: the same order) from ``body``'s ``sensors`` to ``READS`` and from ``WRITES``
-        to its ``commands`` (Signals or names); :class:`WiringError` naming both ends on a mismatch."""
+    def signals(cls, params: ModuleParams) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """(reads, writes) of a controller with these parameters: ``READS``, ``WRITES`` unless a
+        controller's signals depend on its parameters (the CPG's on its circuit file)."""
+        return cls.READS, cls.WRITES
+
+    @classmethod
+    def wire(
+        cls, sensors, commands, body: str = "the body", params: ModuleParams | None = None
+    ) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """Index maps (None: the same order) from ``body``'s ``sensors`` to what the controller reads
+        and from what it writes to the body's ``commands`` (Signals or names); :class:`WiringError`
+        naming both ends on a mismatch."""
         me = f"controller `{cls.__name__}`"
-        read = wiring(sensors, cls.READS, provider=body, consumer=me, what="reads sensors")
-        extra = [n for n in cls.WRITES if n not in names(commands)]
+        reads, writes = cls.signals(params if params is not None else cls.Params())
+        read = wiring(sensors, reads, provider=body, consumer=me, what="reads sensors")
+        extra = [n for n in writes if n not in names(commands)]
         if extra:
             raise WiringError(
                 f"{me} writes commands {extra} that {body} does not take; it takes {list(names(commands))}"
             )
-        write = wiring(cls.WRITES, names(commands), provider=me, consumer=body, what="takes commands")
+        write = wiring(writes, names(commands), provider=me, consumer=body, what="takes commands")
         return read, write
 
     @on(ControllerReset)
     def on_controller_reset(self, msg: ControllerReset) -> Ack:
         layout = (tuple(msg.sensors), tuple(msg.commands))
         if layout != self._wired_for:  # once per body layout, not per trial
-            self._read_index, self._write_index = self.wire(*layout)
+            self._read_index, self._write_index = self.wire(*layout, params=self.params)
             self._wired_for = layout
         self._trial_id = msg.trial_id
         self.flush_neurons()  # the previous logged trial, if any

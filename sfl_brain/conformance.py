@@ -96,15 +96,14 @@ def _replies(cls: type[Module], seed: int) -> list:
             assert link.ticks > 0, f"{cls.__name__}: a trial with a controller ran no tick"
         return [result]
     if isinstance(module, Controller):
-        module.handle(
-            m.ControllerReset(trial_id=0, seed=seed, params={}, sensors=list(cls.READS), commands=list(cls.WRITES))
-        )
+        reads, writes = cls.signals(module.params)
+        module.handle(m.ControllerReset(trial_id=0, seed=seed, params={}, sensors=list(reads), commands=list(writes)))
         replies = []
         for tick in range(3):
-            frame = m.SensorFrame(trial_id=0, tick=tick, values=np.zeros(len(cls.READS)))
+            frame = m.SensorFrame(trial_id=0, tick=tick, values=np.zeros(len(reads)))
             reply = m.decode(m.encode(module.handle(frame)))
-            assert len(reply.values) == len(cls.WRITES), (
-                f"{cls.__name__}: returned {len(reply.values)} commands for {len(cls.WRITES)} WRITES"
+            assert len(reply.values) == len(writes), (
+                f"{cls.__name__}: returned {len(reply.values)} commands for {len(writes)} WRITES"
             )
             replies.append(reply)
         return replies
@@ -120,9 +119,9 @@ def _check_signals(cls: type[Module]) -> None:
             assert len(set(names(declared))) == len(declared), f"{name}.{kind}: duplicate names {names(declared)}"
         assert not cls.COMMANDS or cls.SENSORS, f"{name}: a body that takes commands declares its SENSORS"
     if issubclass(cls, Controller):
-        assert cls.WRITES, f"{name}: a controller declares the commands it WRITES"
-        for kind in ("READS", "WRITES", "NEURONS"):
-            declared = getattr(cls, kind)
+        reads, writes = cls.signals(cls.Params())
+        assert writes, f"{name}: a controller declares the commands it WRITES"
+        for kind, declared in (("READS", reads), ("WRITES", writes), ("NEURONS", cls.NEURONS)):
             assert all(isinstance(s, str) for s in declared), f"{name}.{kind} must be names"
             assert len(set(declared)) == len(declared), f"{name}.{kind}: duplicate names"
 

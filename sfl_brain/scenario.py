@@ -901,7 +901,13 @@ def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
                 )
             else:
                 try:
-                    ctrl_cls.wire(body_cls.SENSORS, body_cls.COMMANDS, body=f"body `{body_name}` ({body_cls.__name__})")
+                    params = ctrl_cls.Params(**classes[controller_name][2])
+                    ctrl_cls.wire(
+                        body_cls.SENSORS,
+                        body_cls.COMMANDS,
+                        body=f"body `{body_name}` ({body_cls.__name__})",
+                        params=params,
+                    )
                 except WiringError as exc:
                     problems.append(Problem(f"modules.{controller_name}", str(exc)))
 
