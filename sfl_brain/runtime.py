@@ -197,6 +197,7 @@ class Supervisor:
             "connect": [self.endpoint] if self.endpoint else self.listen,
             "rrd": str(self.run_dir / "rerun" / f"{inst.name}.rrd") if self.record else None,
             "viewer": self.viewer,
+            "record": self.plan.scenario.record.model_dump(mode="json"),  # what and how often to show
             "realtime": self.realtime,
             "tick_timeout": self.plan.scenario.timeouts.tick,
             "spin": self.plan.scenario.lockstep.spin_us * 1e-6,
