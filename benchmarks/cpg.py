@@ -2,11 +2,20 @@
 
     python benchmarks/cpg.py [--ticks 3000]      (tiny: --ticks 200)
 
-Per tick, interleaved so that all see the same machine load: ``CPGNetwork.advance`` of the planar circuit
-(7 joints, 14 RG cells) and of the humanoid circuit (12 joints, 24 cells), each fed a fixed sensor frame, and
-one physics tick of a walker stepped with a fixed open-loop command. The 8-link planar walker of issue 15 is
-not built yet: the physics figure is the STAND-IN chapter-3 planar biped (``bodies/planar_biped.py``,
-5 bodies, 4 driven joints), stepped as ``benchmarks/planar.py`` (a) steps it.
+Per tick, interleaved so that all see the same machine load, for the planar circuit (7 joints, 14 RG cells) and the
+humanoid circuit (12 joints, 24 cells):
+
+- ``CPGNetwork.advance`` + ``command()``: the network alone, fed a fixed sensor frame;
+- the controller's tick as the framework runs it in the body's process: ``InProcessLink.step(frame)`` ->
+  ``CPGController.on_sensor_frame`` (dispatch, wiring by name, the network, the ``MotorCommand``);
+
+and one physics tick of
+
+- the chapter-3 planar biped (``bodies/planar_biped.py``, 5 bodies, 4 driven joints), stepped with a fixed
+  open-loop command as ``benchmarks/planar.py`` (a) steps it: the stand-in the CPG was first compared with;
+- the 8-link planar walker of Fig. 4.7 (``bodies/planar_8link.py``, 8 links, 7 motors), driven by the planar CPG
+  controller in closed loop (its sense and the controller are not timed, only ``actuate``); a trial that ends (a
+  fall) is restarted, untimed. Left out, and said so, when that body cannot be imported.
 """
 
 from __future__ import annotations
@@ -23,20 +32,68 @@ from _common import stats  # noqa: E402
 from planar import REQUEST  # noqa: E402  (the planar benchmark's trial: the same stand-in physics)
 
 from sfl_brain.bodies.planar_biped import PlanarBiped  # noqa: E402
+from sfl_brain.body import InProcessLink  # noqa: E402
+from sfl_brain.messages import ControllerReset, SensorFrame, TrialRequest  # noqa: E402
+from sfl_brain.modules.controllers.cpg import CPGController, CPGParams  # noqa: E402
 from sfl_brain.modules.cpg import CPGNetwork, load_circuit  # noqa: E402
+from sfl_brain.signals import names  # noqa: E402
+
+try:  # the 8-link walker of issue 15, if this checkout has it
+    from sfl_brain.bodies.planar_8link import PlanarWalker8  # noqa: E402
+except ImportError:
+    PlanarWalker8 = None
+
+CIRCUITS = (("planar_8link", "7 joints, 14 cells"), ("humanoid_nao", "12 joints, 24 cells"))
 
 
-def cpg(name: str) -> tuple[CPGNetwork, np.ndarray]:
-    circuit = load_circuit(name)
-    network = CPGNetwork(circuit)
+def frame_for(circuit) -> np.ndarray:
+    """A plausible sensor frame in the circuit's input order: every joint at its command offset."""
     sensors = np.zeros(len(circuit.inputs))
-    for joint in circuit.joints:  # a plausible frame: every joint at its command offset
+    for joint in circuit.joints:
         if joint.angle_input:
             sensors[circuit.inputs.index(joint.angle_input)] = joint.theta0
-    return network, sensors
+    return sensors
 
 
-def physics() -> PlanarBiped:
+def controller_link(name: str) -> tuple[InProcessLink, np.ndarray]:
+    """The CPG controller behind an in-process link, reset for a body laid out as the circuit's inputs and commands."""
+    params = CPGParams(circuit=name)
+    reads, writes = CPGController.signals(params)
+    link = InProcessLink(CPGController(params))
+    link.reset(ControllerReset(trial_id=0, seed=0, params={}, sensors=list(reads), commands=list(writes)))
+    return link, frame_for(load_circuit(name))
+
+
+class Walker:
+    """The 8-link walker driven by the planar CPG controller; ``tick()`` times one ``actuate``."""
+
+    def __init__(self) -> None:
+        self.body = PlanarWalker8()
+        self.body.logging = False
+        self.link = InProcessLink(CPGController(CPGParams(circuit="planar_8link")))
+        self.trial = -1
+        self.start()
+
+    def start(self) -> None:
+        self.trial += 1
+        request = TrialRequest(trial_id=self.trial, seed=0, body_params={}, controller_params={}, log=False)
+        self.body.start_trial(request)
+        sensors, commands = (list(names(s)) for s in (self.body.SENSORS, self.body.COMMANDS))
+        self.link.reset(ControllerReset(trial_id=self.trial, seed=0, params={}, sensors=sensors, commands=commands))
+        self.n = 0
+
+    def tick(self) -> float:
+        if self.body.done:
+            self.start()
+        frame = SensorFrame(trial_id=self.trial, tick=self.n, values=self.body.sense())
+        command = self.link.step(frame).values
+        self.n += 1
+        t = time.perf_counter()
+        self.body.actuate(command)
+        return time.perf_counter() - t
+
+
+def stand_in() -> PlanarBiped:
     body = PlanarBiped()
     body.logging = False
     body.start_trial(REQUEST)
@@ -47,33 +104,58 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--ticks", type=int, default=3000, help="control ticks timed per item (10 ms of sim each)")
     args = parser.parse_args()
-    planar, planar_sensors = cpg("planar_8link")
-    humanoid, humanoid_sensors = cpg("humanoid_nao")
+    networks = {}
+    for name, _ in CIRCUITS:
+        circuit = load_circuit(name)
+        networks[name] = (CPGNetwork(circuit), frame_for(circuit))
+    links = {name: controller_link(name) for name, _ in CIRCUITS}
     command = np.array([1.0, -1.0, 0.5, 0.5])
-    body = physics()
-    samples = {"planar": [], "humanoid": [], "physics": []}
+    biped = stand_in()
+    walker = Walker() if PlanarWalker8 is not None else None
+    samples: dict[str, list[float]] = {key: [] for key in ("biped", "walker")}
+    clock = time.perf_counter
     for tick in range(args.ticks):
         if tick % 1000 == 999:  # a 10-s trial of the stand-in ends; start another (not timed)
-            body = physics()
-        t0 = time.perf_counter()
-        planar.advance(planar_sensors)
-        t1 = time.perf_counter()
-        humanoid.advance(humanoid_sensors)
-        t2 = time.perf_counter()
-        body.actuate(command)
-        t3 = time.perf_counter()
-        samples["planar"].append(t1 - t0)
-        samples["humanoid"].append(t2 - t1)
-        samples["physics"].append(t3 - t2)
-    medians = {k: float(np.median(v)) for k, v in samples.items()}
-    print(f"one 10-ms control tick (10 RK4 sub-steps of 1 ms for the CPG), {args.ticks} ticks, interleaved:")
-    print(f"  CPG planar_8link (7 joints, 14 cells)    {stats(samples['planar'])}")
-    print(f"  CPG humanoid_nao (12 joints, 24 cells)   {stats(samples['humanoid'])}")
-    print(f"  physics, STAND-IN ch.3 planar biped      {stats(samples['physics'])}  (the 8-link walker is not built)")
-    print(
-        f"  CPG / physics: planar {medians['planar'] / medians['physics']:.2f}, "
-        f"humanoid {medians['humanoid'] / medians['physics']:.2f} (goal < 1)"
-    )
+            biped = stand_in()
+        for name, _ in CIRCUITS:
+            network, sensors = networks[name]
+            t0 = clock()
+            network.advance(sensors)
+            network.command()
+            t1 = clock()
+            link, sensors = links[name]
+            frame = SensorFrame(trial_id=0, tick=tick, values=sensors)
+            t2 = clock()
+            link.step(frame)
+            t3 = clock()
+            samples.setdefault(f"{name} advance", []).append(t1 - t0)
+            samples.setdefault(f"{name} controller", []).append(t3 - t2)
+        t0 = clock()
+        biped.actuate(command)
+        samples["biped"].append(clock() - t0)
+        if walker is not None:
+            samples["walker"].append(walker.tick())
+
+    medians = {key: float(np.median(v)) for key, v in samples.items()}
+    physics = [("biped", "ch.3 biped (stand-in)")] + ([("walker", "8-link walker")] if walker else [])
+    rows = []
+    for name, size in CIRCUITS:
+        rows.append((f"CPG {name} ({size}): CPGNetwork.advance + command", f"{name} advance"))
+        rows.append((f"CPG {name} ({size}): controller tick (on_sensor_frame)", f"{name} controller"))
+    rows.append(("physics, ch.3 planar biped (the stand-in, 4 joints)", "biped"))
+    if walker is not None:
+        rows.append((f"physics, 8-link planar walker (7 joints, CPG-driven, {walker.trial + 1} trials)", "walker"))
+    width = max(len(label) for label, _ in rows) + 2
+    print(f"one 10-ms control tick (CPG: 10 RK4 sub-steps of 1 ms), {args.ticks} ticks, interleaved:")
+    for label, key in rows:
+        print(f"  {label:<{width}}{stats(samples[key])}")
+    if walker is None:
+        print("  (no 8-link planar walker in this checkout, bodies/planar_8link.py: the stand-in's physics only)")
+    print(f"CPG / physics, medians (goal < 1):{''.join(f'{label:>24}' for _, label in physics)}")
+    for name, _ in CIRCUITS:
+        for kind in ("advance", "controller"):
+            ratios = "".join(f"{medians[f'{name} {kind}'] / medians[key]:>24.2f}" for key, _ in physics)
+            print(f"  {f'{name} {kind}':<32}{ratios}")
 
 
 if __name__ == "__main__":

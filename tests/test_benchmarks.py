@@ -53,4 +53,5 @@ def test_brain_benchmark_prints_the_cycle_per_trial():
 
 def test_cpg_benchmark_prints_the_cost_per_tick_beside_the_physics():
     out = bench("cpg.py", "--ticks", "200")
-    figures(out, r"median +([\d.]+) us", count=3)  # planar circuit, humanoid circuit, physics stand-in
+    # planar and humanoid circuits (network and controller tick each), the stand-in and the 8-link walker physics
+    figures(out, r"median +([\d.]+) us", count=6)

@@ -10,6 +10,7 @@ import yaml
 
 from sfl_brain.modules.cpg import CPGNetwork, apply_overrides, load_circuit, validate_circuit
 from sfl_brain.modules.cpg.circuit import CIRCUITS, read_circuit_data
+from sfl_brain.modules.cpg.network import averaged_input, motor_neuron, pattern_formation, sensory_neuron
 from sfl_brain.modules.cpg.patterns import (
     ALMOST_OSCILLATOR,
     KICK_DURATION,
@@ -113,6 +114,70 @@ def test_coupled_joints_step_equals_rk4_by_hand():
     np.testing.assert_allclose(network.membrane_potential.ravel(), V1, rtol=0, atol=1e-12)
 
 
+def textbook_rk4(network: CPGNetwork, h: float) -> None:
+    """One RK4 step as the network computed it before its hot path was rearranged for speed (issue 15), kept as the
+    reference: each stage's dy/dt = z @ ``_rhs`` (+ the terms ``_rhs`` does not hold), then y + c k, one by one."""
+    n = network.n_neurons
+
+    def f(y):
+        V, q = y[:, 0], y[:, 1]
+        z = np.concatenate([V, q, np.tanh(V * network._slope_fast), np.tanh(V * network._slope_synapse)], axis=1)
+        k = (z @ network._rhs).reshape(y.shape)
+        if not network._sigma_s_shared:
+            k[:, 1] += network._sigma_s_over_tau_s * V
+        if network._split:
+            sigma = np.where(V < network.E_s, network.sigma_in, network.sigma_out)
+            k[:, 1] += (sigma - network.sigma_s) * (V - network.E_s) / network.tau_s
+        if network._constant is not None:
+            k += network._constant.reshape(-1, 2, n)
+        return k
+
+    y = network.y.copy()
+    k1 = f(y)
+    k2 = f(y + 0.5 * h * k1)
+    k3 = f(y + 0.5 * h * k2)
+    k4 = f(y + h * k3)
+    network.y[...] = y + h / 6.0 * ((k1 + 2.0 * (k2 + k3)) + k4)
+
+
+def grid_circuit() -> dict:
+    """One joint with every optional term of the step: (4.8)'s split conductances, E_s != 0, a kick, a coupling."""
+    data = one_joint(rg={"sigma_s": 2.0, "sigma_f": 2.0, "sigma_in": 1.5, "sigma_out": 2.5})
+    data["joints"].append({**data["joints"][0], "name": "k"})
+    data["couplings"] = [{"source": "j.E", "target": "k.F", "weight": 0.6}]
+    data["cell"] = {"E_s": 0.2}
+    data["kicks"] = [{"joints": ["j"], "start": 0.0, "duration": 0.08, "amplitude": 1.0}]
+    return data
+
+
+@pytest.mark.parametrize("name", ["planar_8link", "humanoid_nao", "author_code", "grid"])
+def test_the_fast_step_stays_within_1e_12_of_the_textbook_step(name):
+    """The rearranged RK4 (``CPGNetwork._integrate``) computes the same sums in another order: 3 s of each circuit
+    (kicks, heel strikes, a pattern switch; a parameter grid with per-copy sigma_s and (4.8)) stay within 1e-12 of the
+    step it replaced, state and commands."""
+    if name == "grid":
+        circuit, batch = validate_circuit(grid_circuit()), 6
+    else:
+        data = read_circuit_data(name)
+        data["switches"] = [{"joints": {data["joints"][-1]["name"]: {"sigma_s": 1.0, "sigma_f": 0.25}}, "at": 1.5}]
+        circuit, batch = validate_circuit(data), None
+    fast, reference = CPGNetwork(circuit, batch), CPGNetwork(circuit, batch)
+    reference._integrate = lambda h, substeps: [textbook_rk4(reference, h) for _ in range(substeps)]
+    if name == "grid":
+        for network in (fast, reference):
+            network.set_pattern(np.linspace(0.5, 5.0, 6).reshape(-1, 1), 2.0, joints=["j"])
+    rng = np.random.default_rng(11)
+    sensors = rng.uniform(-0.5, 0.5, size=(300, len(circuit.inputs)))
+    if "heel_l" in circuit.inputs:
+        sensors[:, circuit.inputs.index("heel_l")] = np.where(np.arange(300) % 60 < 30, 150.0, 0.0)
+    for values in sensors:
+        fast.advance(values)
+        reference.advance(values)
+        np.testing.assert_allclose(fast.y, reference.y, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(fast.command(), reference.command(), rtol=0, atol=1e-12)
+    assert np.ptp(reference.y[:, 0]) > 1.0  # it moved
+
+
 def test_pattern_formation_motor_and_sensory_neurons_by_hand():
     """(4.9)-(4.13) with the (n + 1) averaging, theta_MLR with opposite signs on E and F (§7.6)."""
     data = one_joint(
@@ -140,6 +205,33 @@ def test_pattern_formation_motor_and_sensory_neurons_by_hand():
     np.testing.assert_allclose(network.pattern_formation[0], [PF_E, PF_F], rtol=0, atol=1e-12)
     np.testing.assert_allclose(network.motor_neuron[0], [MN_E, MN_F], rtol=0, atol=1e-12)
     assert network.command()[0] == pytest.approx(1.0 * (MN_E - MN_F), abs=1e-12)
+
+
+def test_the_static_layers_are_the_readable_equations_exactly():
+    """The tick computes PF, MN and the sensory neurons with prepared constants (halved slopes, one dot for both
+    synaptic tables); ``sensory_neuron``, ``averaged_input``, ``pattern_formation`` and ``motor_neuron`` (the equations
+    as written) give the same bits."""
+    network = CPGNetwork(load_circuit("planar_8link"))
+    network.set_descending(alpha_mlr=0.7, theta_mlr=0.2, joints=["ankle_l"])
+    rng = np.random.default_rng(5)
+    for _ in range(30):
+        phi = rng.uniform(-0.5, 0.5, len(network.circuit.inputs)) * np.where(
+            rng.random(len(network.circuit.inputs)) < 0.3, 300.0, 1.0
+        )
+        network.advance(phi)
+    rho = sensory_neuron(phi[network._sensor_input], network._sensor_alpha, network._sensor_theta)
+    signed = network.theta_mlr_signed
+    pf = pattern_formation(
+        averaged_input(network._w_rg2pf, network.y[:, 0], network._w_pf, rho, network._n_pf),
+        network.pf_alpha,
+        network.alpha_mlr,
+        network.pf_theta,
+        signed,
+    )
+    mn = motor_neuron(averaged_input(network._w_pf2mn, pf, network._w_mn, rho, network._n_mn), 5.0, 0.5)
+    np.testing.assert_array_equal(network.sensory, rho)
+    np.testing.assert_array_equal(network._pf, pf)
+    np.testing.assert_array_equal(network._mn, mn)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -414,3 +506,69 @@ def test_overrides_set_a_weight_by_dotted_path_and_revalidate():
         "c.yaml: joints.0.rgg: no such key; expected one of "
         "['angle_input', 'gain', 'name', 'pf', 'rg', 'synapses'] (did you mean `rg`?)"
     )
+
+
+def test_nested_overrides_merge_key_by_key():
+    """The nested form ``sfl --set`` builds is the dotted one; a mapping merges into the one in the file."""
+    data = read_circuit_data("planar_8link")
+    nested = apply_overrides(
+        data, {"joints": {"2": {"rg": {"sigma_s": 3.0}, "synapses": {"ES_knee_l": {"MN_E": -0.2}}}}}
+    )
+    dotted = apply_overrides(data, {"joints.2.rg.sigma_s": 3.0, "joints.2.synapses.ES_knee_l.MN_E": -0.2})
+    assert nested == dotted
+    assert nested.joints[2].rg.sigma_f == 2.0 and set(nested.joints[2].synapses) == set(data["joints"][2]["synapses"])
+    with pytest.raises(ScenarioError) as err:
+        apply_overrides(data, {"joints": {"9": {"gain": 1.0}}}, file="c.yaml")
+    assert str(err.value) == "c.yaml: joints.9: expected an index below 7; got '9'"
+
+
+def switch_problems(**switch) -> list[str]:
+    data = read_circuit_data("planar_8link")
+    data["switches"] = [{"joints": {"knee_l": {"sigma_s": 1.0, "sigma_f": 0.25}}, **switch}]
+    with pytest.raises(ScenarioError) as err:
+        validate_circuit(data, "c.yaml")
+    return str(err.value).splitlines()
+
+
+def test_a_switch_has_one_trigger_and_names_what_exists():
+    assert switch_problems(input="pelvis") == [
+        "c.yaml: switches.0: expected one of `above`, `rate_above` with `input`; got []"
+    ]
+    assert switch_problems(input="pelvis", above=0.1, rate_above=1.0) == [
+        "c.yaml: switches.0: expected one of `above`, `rate_above` with `input`; got ['above', 'rate_above']"
+    ]
+    assert switch_problems(at=1.0, rate_above=1.0) == ["c.yaml: switches.0.rate_above: expected only with `input`"]
+    assert switch_problems(at=1.0, joint_kicks={"hip_l": -1.0}, inhibit=[["hip_l", "kne_l"]]) == [
+        "c.yaml: switches.0.joint_kicks.hip_l: expected one of the joints this switch switches ['knee_l']; got 'hip_l'",
+        "c.yaml: switches.0.inhibit.0.1: expected one of the joints ['hip_l', 'hip_r', 'knee_l', 'knee_r', 'ankle_l', "
+        "'ankle_r', 'trunk']; got 'kne_l' (did you mean `knee_l`?)",
+    ]
+
+
+def test_a_switch_silences_the_couplings_it_names_and_reset_restores_them():
+    data = read_circuit_data("planar_8link")
+    data["switches"] = [
+        {
+            "joints": {"knee_l": {"sigma_s": 1.0, "sigma_f": 0.25}},
+            "at": 0.05,
+            "joint_kicks": {"knee_l": -2.0},
+            "inhibit": [["hip_l", "knee_l"]],
+        }
+    ]
+    circuit = validate_circuit(data)
+    network = CPGNetwork(circuit)
+    hip, knee = (slice(2 * circuit.joint_index(j), 2 * circuit.joint_index(j) + 2) for j in ("hip_l", "knee_l"))
+    before = network.coupling.copy()
+    assert np.any(before[knee, hip])
+    for _ in range(10):
+        network.advance()
+    [event] = network.switch_events
+    assert (event.time, event.kicks, event.inhibited) == (pytest.approx(0.05), {"knee_l": -2.0}, (("hip_l", "knee_l"),))
+    assert not np.any(network.coupling[knee, hip]) and not np.any(network.coupling[hip, knee])
+    assert np.any(network.coupling[knee, knee])  # the joint's own E <-> F synapses stay (Table 4.1)
+    changed = network.coupling != before
+    changed[knee, hip] = changed[hip, knee] = False
+    assert not changed.any()  # nothing else
+    network.reset()
+    np.testing.assert_array_equal(network.coupling, before)
+    assert network.switch_events == []

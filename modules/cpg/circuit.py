@@ -27,7 +27,8 @@ Layout of a file (see ``circuits/*.yaml``; CPG-HUMANOID.md is "the digest" below
     couplings: [{source: hip_l.E, target: hip_r.F, weight: 1.0}]   # RG -> RG, through tanh(V/A_f)
     kicks: [{joints: [hip_l], start: 0.0, duration: 0.08, amplitude: 1.0}]
     phase_resets: [{sensor: GB_l, joint: hip_l, amplitude: -1.0, duration: 0.04, enabled: true}]
-    switches: [{joints: {knee_l: {sigma_s: .., sigma_f: ..}}, at: 2.0}]   # or input: ..., above: ...
+    switches: [{joints: {knee_l: {sigma_s: .., sigma_f: ..}}, at: 2.0}]   # or input: ..., above: ... (a level)
+                                       # or input: ..., rate_above: ... (a push detector); inhibit: [[hip_l, knee_l]]
 
 Current pulses (kicks, phase resets, switch kicks) follow the author's code sign convention (digest
 §5): ``amplitude`` is the current injected into the flexor RG, the extensor RG receives its negative.
@@ -36,14 +37,14 @@ Current pulses (kicks, phase resets, switch kicks) follow the author's code sign
 from __future__ import annotations
 
 import copy
+import functools
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from sfl_brain.registry import nearest
-from sfl_brain.scenario import Problem, ScenarioError, problems_from
+from sfl_brain.scenario import Problem, ScenarioError, parse_yaml, problems_from
 
 CIRCUITS = Path(__file__).resolve().parent / "circuits"
 
@@ -145,14 +146,24 @@ class PhaseReset(Strict):
 class Switch(Strict):
     """Pattern switching (digest §7.11): new (sigma_s, sigma_f) for the named joints, V = q = 0, theta_0 := the
     measured angle, then a kick of ``kick`` (into RG-F; RG-E gets its negative) for ``kick_duration`` s.
-    Triggered once, at time ``at`` or when the input ``input`` exceeds ``above``."""
+
+    Triggered once: at time ``at`` (s), or when the input ``input`` exceeds ``above`` (a level), or when its rate of
+    change exceeds ``rate_above`` (per s; the push detector of §7.11, e.g. the torso's pitch rate). ``joint_kicks``
+    gives a joint its own kick: its sign is the direction of that joint's switch (L1437). ``inhibit`` lists joint
+    pairs whose RG-RG couplings (both ways) are silenced at the switch: "synapses between CPGs of the hip and the
+    knee joints are inhibited, while keeping the connection between CPGs of the ankle and the hip" (L1311), since
+    "inhibiting the synaptic connection between CPGs is necessary to get different patterns in different joints"
+    (L1292)."""
 
     joints: dict[Name, RhythmGenerator] = Field(min_length=1)
     at: NonNegative | None = None
     input: Name | None = None
     above: Number | None = None
+    rate_above: Number | None = None
     kick: Number = 1.0  # §7.11 ("kick +-I"), I = 1 as the kicks of §7.1
     kick_duration: Positive = 0.2  # s, §7.11 / §5 (the author's later scripts)
+    joint_kicks: dict[Name, Number] = {}
+    inhibit: list[Annotated[list[Name], Field(min_length=2, max_length=2)]] = []
 
 
 class Circuit(Strict):
@@ -267,12 +278,22 @@ def _reference_problems(c: Circuit) -> list[Problem]:
     for i, s in enumerate(c.switches):
         for name in s.joints:
             need(f"switches.{i}.joints.{name}", name, joints, "joints")
+        for name in s.joint_kicks:
+            need(f"switches.{i}.joint_kicks.{name}", name, list(s.joints), "joints this switch switches")
+        for n, pair in enumerate(s.inhibit):
+            for m, name in enumerate(pair):
+                need(f"switches.{i}.inhibit.{n}.{m}", name, joints, "joints")
+        levels = [key for key in ("above", "rate_above") if getattr(s, key) is not None]
         if (s.at is None) == (s.input is None):
             out.append(Problem(f"switches.{i}", "expected exactly one trigger, `at` or `input`; got both or neither"))
         if s.input is not None:
             need(f"switches.{i}.input", s.input, c.inputs, "inputs")
-            if s.above is None:
-                out.append(Problem(f"switches.{i}.above", "required key is missing (with `input`)"))
+            if len(levels) != 1:
+                out.append(
+                    Problem(f"switches.{i}", f"expected one of `above`, `rate_above` with `input`; got {levels}")
+                )
+        elif levels:
+            out.append(Problem(f"switches.{i}.{levels[0]}", "expected only with `input`"))
     return out
 
 
@@ -299,16 +320,35 @@ def circuit_path(name_or_path: str | Path) -> Path:
 
 
 def read_circuit_data(name_or_path: str | Path) -> dict:
-    """The circuit file's raw data, unvalidated (to apply overrides to)."""
+    """The circuit file's raw data, unvalidated (to apply overrides to): a fresh copy on every call.
+
+    Read with the scenario's YAML loader (``sfl_brain.scenario.parse_yaml``: the same limits for files from
+    strangers, duplicate keys refused). A file is parsed once per content (path, size, modification time): a
+    controller asks for its circuit when its parameters are checked, when it is built and when it is wired."""
     path = circuit_path(name_or_path)
-    if not path.exists():
+    try:
+        stat = path.stat()
+    except (OSError, ValueError):  # no such file, a name too long, a NUL byte
+        stat = None
+    if stat is None or not path.is_file():
         shipped = sorted(p.stem for p in CIRCUITS.glob("*.yaml"))
         problem = Problem("", f"no such circuit; shipped: {shipped}", nearest(str(name_or_path), shipped))
         raise ScenarioError(str(path), [problem])
+    data = _parse(str(path.resolve()), stat.st_size, stat.st_mtime_ns)
+    if not isinstance(data, dict):
+        raise ScenarioError(str(path), [Problem("", f"expected a mapping; got {type(data).__name__}")])
+    return copy.deepcopy(data)
+
+
+@functools.lru_cache(maxsize=32)
+def _parse(path: str, size: int, mtime_ns: int) -> Any:
+    """The parsed file (cached per content; callers deep-copy it)."""
+    del size, mtime_ns  # the cache key only
     try:
-        return yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise ScenarioError(str(path), [Problem("", f"expected valid YAML; got {exc}")]) from None
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        raise ScenarioError(path, [Problem("", f"cannot read: {exc.strerror or exc}")]) from None
+    return parse_yaml(data, path)
 
 
 def load_circuit(name_or_path: str | Path, overrides: dict[str, Any] | None = None) -> Circuit:
@@ -321,32 +361,44 @@ def load_circuit(name_or_path: str | Path, overrides: dict[str, Any] | None = No
 def apply_overrides(circuit_dict: dict, overrides: dict[str, Any], file: str = "<circuit>") -> Circuit:
     """Set values at dotted key paths (list items by index: ``joints.0.rg.sigma_s``), then re-validate.
 
-    The input dict is not changed. A path that does not exist in the file is an error naming it (a new key
-    inside an existing mapping is allowed: the schema then says whether it is valid)."""
+    A mapping given as a value is merged, key by key, into the mapping or list already at its path, so the nested
+    form that ``sfl ... --set modules.controller.params.circuit_overrides.joints.0.rg.sigma_s=1`` builds,
+    ``{"joints": {"0": {"rg": {"sigma_s": 1}}}}``, is the same override as ``{"joints.0.rg.sigma_s": 1}``. Any other
+    value replaces what is at its path. The input dict is not changed. A path that does not exist in the file is an
+    error naming it (a new key inside an existing mapping is allowed: the schema then says whether it is valid)."""
     data = copy.deepcopy(circuit_dict)
-    problems = []
-    for dotted, value in overrides.items():
-        parts = dotted.split(".")
-        node: Any = data
-        for depth, part in enumerate(parts[:-1]):
-            node, problem = _child(node, part, ".".join(parts[: depth + 1]))
-            if problem:
-                problems.append(problem)
-                break
-        else:
-            last = parts[-1]
-            if isinstance(node, list):
-                if not (last.isdigit() and int(last) < len(node)):
-                    problems.append(Problem(dotted, f"expected an index below {len(node)}; got {last!r}"))
-                    continue
-                node[int(last)] = value
-            elif isinstance(node, dict):
-                node[last] = value
-            else:
-                problems.append(Problem(dotted, f"expected a mapping or list to set a key in; got {node!r}"))
+    problems: list[Problem] = []
+    for key, value in overrides.items():
+        _override(data, str(key).split("."), value, (), problems)
     if problems:
         raise ScenarioError(file, problems)
     return validate_circuit(data, file)
+
+
+def _override(node: Any, parts: list[str], value: Any, done: tuple, problems: list[Problem]) -> None:
+    """Set ``value`` at ``parts`` below ``node`` (``done``: the key path of ``node``), merging mappings."""
+    for depth, part in enumerate(parts[:-1]):
+        node, problem = _child(node, part, ".".join((*done, *parts[: depth + 1])))
+        if problem:
+            problems.append(problem)
+            return
+    last, path = parts[-1], ".".join((*done, *parts))
+    if isinstance(node, list):
+        if not (last.isdigit() and int(last) < len(node)):
+            problems.append(Problem(path, f"expected an index below {len(node)}; got {last!r}"))
+            return
+        index: Any = int(last)
+    elif isinstance(node, dict):
+        index = last
+    else:
+        problems.append(Problem(path, f"expected a mapping or list to set a key in; got {node!r}"))
+        return
+    present = node[index] if isinstance(node, list) or index in node else None
+    if isinstance(value, dict) and isinstance(present, dict | list):
+        for key, item in value.items():
+            _override(present, str(key).split("."), item, (*done, *parts), problems)
+    else:
+        node[index] = value
 
 
 def _child(node: Any, part: str, path: str) -> tuple[Any, Problem | None]:

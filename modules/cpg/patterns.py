@@ -18,6 +18,17 @@ from .network import CPGNetwork
 PLATEAU, QUIESCENT, ALMOST_OSCILLATOR, OSCILLATOR = "plateau", "quiescent", "almost_oscillator", "oscillator"
 KINDS = (PLATEAU, QUIESCENT, ALMOST_OSCILLATOR, OSCILLATOR)
 
+#: one (sigma_s, sigma_f) of each class, to switch a joint to a pattern by name (digest §7.11): points of the digest's
+#: single-cell reference map (CPG-HUMANOID.md §1.7), the same points tests/test_cpg.py classifies: plateau below the
+#: line sigma_s = (sigma_f - 1) / 2 (sigma_s = 0), quiescent at sigma_f <= 0.25, almost-oscillator at sigma_f in
+#: [0.5, 1], oscillator at (2, 2) (period 1.25 s).
+PATTERN_POINTS = {
+    PLATEAU: (0.0, 2.0),
+    QUIESCENT: (1.0, 0.25),
+    ALMOST_OSCILLATOR: (4.0, 0.75),
+    OSCILLATOR: (2.0, 2.0),
+}
+
 # The single-cell kick of the digest's reference map (CPG-HUMANOID.md §1.7): +1 into the cell for 80 ms.
 KICK_AMPLITUDE = 1.0
 KICK_DURATION = 0.08  # s

@@ -1,0 +1,301 @@
+"""The multi-layered multi-pattern CPG of thesis chapter 4 as a controller: its own process, in lockstep with the body.
+
+The network is ``sfl_brain.modules.cpg`` (``CPGNetwork``: rhythm generators (4.1)-(4.8), pattern formation
+(4.9)-(4.10), motor neurons (4.11)-(4.12), sensory neurons (4.13), RG-RG couplings); this module only hosts it. Each
+control tick the controller takes the body's sensors, advances the network by the tick (``substeps`` RK4 steps:
+h = 1 ms at a 10-ms tick, digest §7.2) and sends the joint commands: motor voltages ``v_<joint>`` for a voltage
+circuit ((3.6) L874, the planar walker) or target angles ``q_<joint>`` (rad) for a position circuit (the author's NAO
+command, digest §5, §7.8). "The digest" is CPG-HUMANOID.md; its sections are cited as §.
+
+What it reads and writes depends on the circuit: it reads the circuit's ``inputs`` (by name: the body may order its
+sensors any way and have more) and writes one command per joint (``signals``).
+
+Parameters are data: ``circuit`` names a shipped circuit (``modules/cpg/circuits/*.yaml``) or a YAML file, and
+``circuit_overrides`` sets any value in it by key path (``joints.0.rg.sigma_s``, ``couplings.3.weight``; a nested
+mapping, as ``--set modules.controller.params.circuit_overrides.joints.0.rg.sigma_s=1`` builds it, is the same). A bad
+path or value fails ``sfl check`` naming the circuit's key path. The network is rebuilt from them per process, and
+reset per trial.
+
+- ``phase_reset`` (§7.10, E4.3 L1268-1282) switches the circuit's phase resets (heel contact -> hip RG pulse) on or
+  off; on, each keeps its own ``enabled`` flag.
+- ``switch`` (§7.11, E4.4 L1284-1324, E4.7 L1430-1437): pattern switching of chosen joints, once per trial, on a time
+  (``at``) or on a push detector (the forward rate of ``push_input``, e.g. the pelvis angle, above ``push_rate``).
+  The chosen joints take their new pattern (named: plateau, quiescent, ... as ``patterns.PATTERN_POINTS``, or a
+  (sigma_s, sigma_f)), V = q = 0, theta_0 := the measured angle (position circuits), and a kick of +I into RG-F,
+  -I into RG-E for 0.2 s, per joint if given (its sign = the switch's direction, L1437); ``inhibit`` silences the
+  RG-RG couplings between joint pairs (L1311: hip-knee inhibited, ankle-hip kept). It becomes one more entry of the
+  circuit's ``switches``; the network carries it out. On logged trials each switch is a telemetry event
+  ``events/pattern_switch``.
+- Trial parameters (what a learning protocol sets per trial, ``TRIAL_PARAMS``): ``sigma_s``, ``sigma_f`` (E4.2: the
+  RG pattern (w1, w2) = (sigma_s, sigma_f) learnt for all joints at once, L1251, "the same pattern in all joints
+  exists whenever the coupling circuitry is active", L1286; ``pattern_joints`` restricts them to some joints), and the
+  descending control ``alpha_mlr``, ``theta_mlr`` of (4.9) (E4.6 L1417-1426), on the same joints.
+
+On logged trials every neuron is shown on ``sim_time``: per joint and side (E, F) RG V and q, PF and MN, then the
+sensory neurons (``CPGNetwork.neuron_names``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import Field, ValidationError, field_validator, model_validator
+from pydantic_core import InitErrorDetails, PydanticCustomError
+
+from sfl_brain.body import Controller
+from sfl_brain.messages import Ack, ControllerReset
+from sfl_brain.module import ModuleParams, on
+from sfl_brain.modules.cpg import CPGNetwork
+from sfl_brain.modules.cpg.circuit import Circuit, apply_overrides, circuit_path, read_circuit_data, validate_circuit
+from sfl_brain.modules.cpg.patterns import PATTERN_POINTS
+from sfl_brain.registry import nearest
+from sfl_brain.scenario import ScenarioError
+from sfl_brain.telemetry import Event
+
+#: what a trial may set (see the module docstring)
+TRIAL_PARAMS = ("sigma_s", "sigma_f", "alpha_mlr", "theta_mlr")
+
+
+class PatternPoint(ModuleParams):
+    """An RG pattern by its two shape parameters (4.5), (4.7); thesis range [0, 5] (Table 4.1)."""
+
+    sigma_s: float = Field(ge=0, description="g_K / g_L (4.7)")
+    sigma_f: float = Field(ge=0, description="g_Ca / g_L (4.5)")
+
+
+class PatternSwitch(ModuleParams):
+    """Pattern switching of chosen joints on a trigger, once per trial (digest §7.11; see the module docstring)."""
+
+    trigger: Literal["none", "time", "push"] = Field("none", description="none, a time (at) or a push detector")
+    at: float = Field(5.0, ge=0, description="s of trial time, for trigger time")
+    push_input: str = Field("pelvis", description="the circuit input whose rate is the push detector (trigger push)")
+    push_rate: float = Field(
+        1.0,
+        gt=0,
+        description="per s: the detector fires when push_input rises faster (rad/s for an angle: forward pitch). "
+        "Not in the thesis (§0.8, §7.11); chosen here. A 45 N, 0.1 s push on the back (E4.4, L1319) adds about "
+        "0.2 rad/s to the 8-link walker's pelvis rate: calibrate it just above flat walking's range, as §7.17 does "
+        "for slopes",
+    )
+    joints: dict[str, Literal["plateau", "quiescent", "almost_oscillator", "oscillator"] | PatternPoint] = Field(
+        {}, description="joint -> its new pattern: by name (patterns.PATTERN_POINTS) or {sigma_s, sigma_f}"
+    )
+    kick: float = Field(
+        1.0, description="current into RG-F (RG-E gets its negative) after the switch (§7.11: +-I, I = 1)"
+    )
+    kick_duration: float = Field(0.2, gt=0, description="s, §7.11")
+    joint_kicks: dict[str, float] = Field({}, description="a switched joint's own kick; its sign = direction (L1437)")
+    inhibit: list[tuple[str, str]] = Field([], description="joint pairs whose RG-RG couplings are silenced (L1311)")
+
+    def circuit_entry(self) -> dict:
+        """This switch as an entry of a circuit's ``switches`` (modules/cpg/circuit.py ``Switch``)."""
+        joints = {}
+        for name, pattern in self.joints.items():
+            sigma_s, sigma_f = (
+                PATTERN_POINTS[pattern] if isinstance(pattern, str) else (pattern.sigma_s, pattern.sigma_f)
+            )
+            joints[name] = {"sigma_s": float(sigma_s), "sigma_f": float(sigma_f)}
+        trigger = (
+            {"at": self.at} if self.trigger == "time" else {"input": self.push_input, "rate_above": self.push_rate}
+        )
+        return {
+            "joints": joints,
+            **trigger,
+            "kick": self.kick,
+            "kick_duration": self.kick_duration,
+            "joint_kicks": dict(self.joint_kicks),
+            "inhibit": [list(pair) for pair in self.inhibit],
+        }
+
+
+def _invalid(problems: list[tuple[tuple, str]], given: Any) -> ValidationError:
+    """A ValidationError with one error per (key path, message): raised in a validator, pydantic puts the field's name
+    in front of each path, so ``sfl check`` prints ``modules.controller.params.<field>.<path>: <message>``."""
+    return ValidationError.from_exception_data(
+        "CPGParams",
+        [InitErrorDetails(type=PydanticCustomError("cpg", message), loc=loc, input=given) for loc, message in problems],
+    )
+
+
+def _circuit_problems(exc: ScenarioError) -> list[tuple[tuple, str]]:
+    """A circuit's problems as (key path inside the circuit, message with its did-you-mean)."""
+    out = []
+    for p in exc.problems:
+        hint = f" (did you mean `{p.suggestion}`?)" if p.suggestion else ""
+        out.append((tuple(p.path.split(".")) if p.path else (), f"{p.message}{hint}"))
+    return out
+
+
+class CPGParams(ModuleParams):
+    circuit: str = Field(
+        "planar_8link",
+        description="a shipped circuit (modules/cpg/circuits) or a YAML file (absolute, or from the cwd)",
+    )
+    circuit_overrides: dict[str, Any] = Field({}, description="circuit key path -> value (nested mappings merge)")
+    phase_reset: bool = Field(True, description="the circuit's phase resets on (each as its `enabled`) or all off")
+    substeps: int = Field(10, ge=1, le=100, description="RK4 steps per control tick: h = tick / substeps (1 ms, §7.2)")
+    pattern_joints: list[str] = Field(
+        [], description="joints the trial's sigma_s, sigma_f, alpha_mlr, theta_mlr set; empty = all (L1286)"
+    )
+    switch: PatternSwitch = PatternSwitch()
+
+    @field_validator("circuit")
+    @classmethod
+    def _circuit_loads(cls, name: str) -> str:
+        try:
+            validate_circuit(read_circuit_data(name), str(circuit_path(name)))
+        except ScenarioError as exc:  # the file's own problems, each with its key path in the file
+            raise _invalid([((), line) for line in str(exc).splitlines()], name) from None
+        return name
+
+    @field_validator("circuit_overrides")
+    @classmethod
+    def _overrides_apply(cls, overrides: dict, info) -> dict:
+        if "circuit" in info.data:  # else the circuit itself failed, reported there
+            try:
+                apply_overrides(read_circuit_data(info.data["circuit"]), overrides)
+            except ScenarioError as exc:
+                raise _invalid(_circuit_problems(exc), overrides) from None
+        return overrides
+
+    @model_validator(mode="after")
+    def _names_exist(self) -> CPGParams:
+        circuit = apply_overrides(read_circuit_data(self.circuit), self.circuit_overrides)
+        joints, inputs = [j.name for j in circuit.joints], list(circuit.inputs)
+        problems: list[tuple[tuple, str]] = []
+
+        def need(loc: tuple, given: str, valid: list[str], what: str) -> None:
+            if given not in valid:
+                hint = nearest(given, valid)
+                tail = f" (did you mean `{hint}`?)" if hint else ""
+                problems.append((loc, f"expected one of the {what} {valid}; got {given!r}{tail}"))
+
+        for i, name in enumerate(self.pattern_joints):
+            need(("pattern_joints", i), name, joints, f"joints of circuit {circuit.name}")
+        s = self.switch
+        for name in s.joints:
+            need(("switch", "joints", name), name, joints, f"joints of circuit {circuit.name}")
+        for name in s.joint_kicks:
+            need(("switch", "joint_kicks", name), name, list(s.joints), "joints this switch switches")
+        for i, pair in enumerate(s.inhibit):
+            for k, name in enumerate(pair):
+                need(("switch", "inhibit", i, k), name, joints, f"joints of circuit {circuit.name}")
+        if s.trigger != "none" and not s.joints:
+            problems.append((("switch", "joints"), f"expected the joints to switch (trigger {s.trigger!r}); got none"))
+        if s.trigger == "push":
+            need(("switch", "push_input"), s.push_input, inputs, f"inputs of circuit {circuit.name}")
+        if problems:
+            raise _invalid(problems, self.model_dump(mode="json"))
+        return self
+
+    def build_circuit(self) -> Circuit:
+        """The circuit the controller runs: the file, its overrides, the phase-reset switch and the pattern switch."""
+        data = apply_overrides(read_circuit_data(self.circuit), self.circuit_overrides).model_dump()
+        if not self.phase_reset:
+            for reset in data["phase_resets"]:
+                reset["enabled"] = False
+        if self.switch.trigger != "none":
+            data["switches"].append(self.switch.circuit_entry())
+        return validate_circuit(data, str(circuit_path(self.circuit)))
+
+
+def command_names(circuit: Circuit) -> tuple[str, ...]:
+    """One command per joint: ``v_<joint>`` (V) for a voltage circuit, ``q_<joint>`` (rad) for a position circuit."""
+    prefix = "v" if circuit.command == "voltage" else "q"
+    return tuple(f"{prefix}_{j.name}" for j in circuit.joints)
+
+
+class CPGController(Controller):
+    """The MLMP-CPG of ch. 4 (Figs. 4.8-4.12, 4.19; eqs. 4.1-4.13), any circuit; learns sigma_s, sigma_f per trial."""
+
+    Params = CPGParams
+    TRIAL_PARAMS = TRIAL_PARAMS
+
+    def __init__(self, params: CPGParams | None = None, *, seed: int = 0) -> None:
+        params = params if params is not None else self.Params()
+        self.circuit = params.build_circuit()
+        self.network = CPGNetwork(self.circuit)
+        #: per instance: the neurons depend on the circuit (see the report on ``Controller.NEURONS``)
+        self.NEURONS = tuple(self.network.neuron_names())
+        joints = params.pattern_joints or [j.name for j in self.circuit.joints]
+        self._pattern_joints = joints
+        self._pattern_columns = 2 * np.array([self.circuit.joint_index(n) for n in joints])  # their E cells
+        self._reset_message: ControllerReset | None = None
+        self._control_dt = 0.01
+        self._event_log: tuple[int, float] | None = None  # (trial, t0) of a logged trial
+        super().__init__(params, seed=seed)
+
+    @classmethod
+    def signals(cls, params: CPGParams) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """Reads the circuit's inputs, writes one command per joint (``command_names``)."""
+        circuit = params.build_circuit()
+        return tuple(circuit.inputs), command_names(circuit)
+
+    @classmethod
+    def check_trial_param(cls, name: str, value) -> None:
+        """Raise ValueError if ``value`` cannot be trial parameter ``name`` (``sfl check`` calls this)."""
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+            raise ValueError(f"{name}: expected a finite number; got {value!r}")
+        if name in ("sigma_s", "sigma_f") and value < 0:
+            raise ValueError(f"{name}: expected a number >= 0 (Table 4.1: [0, 5]); got {value!r}")
+
+    @on(ControllerReset)
+    def on_controller_reset(self, msg: ControllerReset) -> Ack:
+        self._reset_message = msg  # configure (called by the base after the previous trial's flush) reads it
+        return super().on_controller_reset(msg)
+
+    def configure(self, params: dict, seed: int) -> None:
+        unknown = [k for k in params if k not in TRIAL_PARAMS]
+        if unknown:
+            hint = nearest(unknown[0], TRIAL_PARAMS)
+            tail = f" (did you mean `{hint}`?)" if hint else ""
+            raise ValueError(f"CPGController takes trial parameters {list(TRIAL_PARAMS)}; got {unknown}{tail}")
+        for name, value in params.items():
+            self.check_trial_param(name, value)
+        msg = self._reset_message
+        self._control_dt = msg.dt if msg is not None else 0.01
+        log = msg is not None and msg.log and self.telemetry is not None
+        self._event_log = (msg.trial_id, msg.t0) if log else None
+        network = self.network
+        network.reset(seed)
+        if "sigma_s" in params or "sigma_f" in params:  # E4.2: the learnt pattern (L1251, L1286)
+            columns = self._pattern_columns  # a value not given stays the circuit's
+            sigma_s = float(params["sigma_s"]) if "sigma_s" in params else network.sigma_s[0, columns]
+            sigma_f = float(params["sigma_f"]) if "sigma_f" in params else network.sigma_f[0, columns]
+            network.set_pattern(sigma_s, sigma_f, joints=self._pattern_joints)
+        if "alpha_mlr" in params or "theta_mlr" in params:  # (4.9) descending control
+            network.set_descending(params.get("alpha_mlr"), params.get("theta_mlr"), joints=self._pattern_joints)
+
+    def step(self, sensors: np.ndarray) -> np.ndarray:
+        self.network.advance(sensors, self._control_dt, self.params.substeps)
+        return self.network.command()
+
+    def neurons(self) -> np.ndarray:
+        return self.network.neuron_values()
+
+    def flush_neurons(self) -> None:
+        """End of a logged trial: its pattern switches as events, then (the base) its neuron activities."""
+        log, self._event_log = self._event_log, None
+        if log is not None and self.telemetry is not None:
+            trial_id, t0 = log
+            for event in self.network.switch_events:
+                self.telemetry.emit(Event("events/pattern_switch", trial_id, t0 + event.time, switch_text(event)))
+        super().flush_neurons()
+
+
+def switch_text(event) -> str:
+    """One line saying what a pattern switch did."""
+    names = {point: kind for kind, point in PATTERN_POINTS.items()}
+    parts = []
+    for joint, point in event.patterns.items():
+        kind = names.get(point)
+        parts.append(
+            f"{joint} -> {kind + ' ' if kind else ''}(sigma_s {point[0]:g}, sigma_f {point[1]:g}), "
+            f"kick {event.kicks[joint]:+g}"
+        )
+    text = "pattern switch: " + "; ".join(parts)
+    if event.inhibited:
+        text += "; couplings silenced between " + ", ".join(f"{a}-{b}" for a, b in event.inhibited)
+    return text
