@@ -1,8 +1,10 @@
-"""Run a plan's protocol with every module in this one process (no bus).
+"""Run a plan's protocol with every module in this one process: no bus, no Zenoh, no processes.
 
-The same protocol code and the same messages as ``sfl run``, minus Zenoh: used by the
-tests of brain-module properties, by the benchmarks as the one-process baseline, and to
-show that the processes-over-Zenoh run gives identical records.
+The same protocol code and the same messages as ``sfl run``: :class:`LocalModules` is the
+:class:`~sfl_brain.service.ModuleService` that hands each request straight to its module (through
+the codec, as on the wire, unless told not to). Used by the tests of brain-module properties, by
+the benchmarks as the one-process baseline, and to show that the processes-over-Zenoh run gives
+identical records. Nothing this module imports needs Zenoh.
 """
 
 from __future__ import annotations
@@ -12,39 +14,42 @@ import tempfile
 from pathlib import Path
 
 from .body import Body, InProcessLink
-from .host import make_module
+from .events import Events
 from .messages import Message, decode, encode
+from .module import Module
 from .protocols import PROTOCOLS, Conductor
-from .records import RecordWriter, read_records
-from .scenario import Plan
+from .records import RecordWriter, read_records, record_to
+from .registry import resolve
+from .scenario import Instance, Plan
+from .service import Outcome
 
 
-class _NoRerun:
-    def decisions(self, rows):
-        pass
+def build(inst: Instance) -> Module:
+    """The module of one plan instance, as a host process builds it (``host.make_module``)."""
+    cls, _ = resolve(inst.reference)
+    module = cls(cls.Params.model_validate(inst.params), seed=inst.seed)
+    module.entity = inst.spec_name
+    return module
 
-    def trial(self, row):
-        pass
 
-
-class LocalSupervisor:
-    """Hosts every instance of a plan in-process; the Supervisor's request surface."""
+class LocalModules:
+    """Every instance of a plan in this process; a request is answered when it is submitted."""
 
     def __init__(self, plan: Plan, through_codec: bool = True) -> None:
         self.plan = plan
         self.through_codec = through_codec
-        self.modules = {}
+        self.modules: dict[str, Module] = {}
         for inst in plan.instances:
-            module = make_module(inst.reference, inst.params, inst.seed, inst.spec_name)
+            module = build(inst)
             if isinstance(module, Body):
                 module.worker = inst.name
                 if module.COMMANDS:
                     ctrl = inst.colocated or next(
                         i for i in plan.instances if i.name == inst.routes["controller.sensors"]
                     )
-                    module.link = InProcessLink(make_module(ctrl.reference, ctrl.params, ctrl.seed, ctrl.spec_name))
+                    module.link = InProcessLink(build(ctrl))
             self.modules[inst.name] = module
-        self._results: dict[int, Message] = {}
+        self._outcomes: dict[int, Outcome] = {}
         self._next = 0
 
     def _deliver(self, target: str, message: Message) -> Message:
@@ -57,16 +62,19 @@ class LocalSupervisor:
         return reply
 
     def submit(self, target: str, message: Message, timeout: float) -> int:
-        token = self._next
+        ticket = self._next
         self._next += 1
-        self._results[token] = self._deliver(target, message)
-        return token
+        self._outcomes[ticket] = self._deliver(target, message)
+        return ticket
 
-    def wait_any(self, tokens, timeout=None):
-        return [(t, self._results.pop(t)) for t in tokens]
+    def wait_any(self, tickets: list[int], timeout: float | None = None) -> list[tuple[int, Outcome]]:
+        return [(t, self._outcomes.pop(t)) for t in tickets]
 
     def workers(self) -> list[str]:
         return list(self.plan.bodies)
+
+    def wait_for_workers(self, timeout: float) -> None:
+        """Never needed: every body of the plan is a worker, always."""
 
 
 def run_local(plan: Plan, run_dir: Path | None = None, through_codec: bool = True) -> list[dict]:
@@ -77,8 +85,10 @@ def run_local(plan: Plan, run_dir: Path | None = None, through_codec: bool = Tru
         run_dir = Path(tmp.name)
     run_dir.mkdir(parents=True, exist_ok=True)
     writer = RecordWriter(run_dir / "records.jsonl")
+    events = Events()
+    record_to(events, writer, decisions=plan.scenario.record.decisions)
     try:
-        conductor = Conductor(plan, LocalSupervisor(plan, through_codec), writer, _NoRerun(), run_dir)
+        conductor = Conductor(plan, LocalModules(plan, through_codec), events, run_dir)
         PROTOCOLS[plan.scenario.protocol.kind](conductor)
     finally:
         writer.close()

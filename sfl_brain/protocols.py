@@ -1,8 +1,11 @@
-"""Protocols the runtime runs: the learning cycle, the sweep and the exploit walk.
+"""Protocols a run runs: the learning cycle, the sweep and the exploit walk.
 
-A protocol talks to modules only through messages (``Conductor.call`` for brain
-modules, ``Conductor.trials`` for bodies), writes one record row per decision and
-per trial, and logs the same to Rerun.
+A protocol talks to modules only through messages (``Conductor.call`` for brain modules,
+``Conductor.trials`` for bodies), over whatever hosts them (a
+:class:`~sfl_brain.service.ModuleService`: every module in this process, or one process per module
+over Zenoh; nothing here imports Zenoh or the supervisor). It publishes one row per decision and
+per trial, and its progress, as :mod:`~sfl_brain.events`; the run writes the records, the Rerun
+log and the progress bar from them.
 """
 
 from __future__ import annotations
@@ -11,16 +14,17 @@ import itertools
 import math
 import time
 from collections import Counter, deque
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from . import messages as m
-from .records import RecordWriter
-from .runtime import Interrupted, RunError, Supervisor
+from .events import DecisionsMade, Events, ProgressUpdated, TrialInterrupted, TrialRecorded
+from .records import decision_row, point_fields, trial_row
 from .scenario import Plan
+from .service import Interrupted, ModuleService, RunError
 
 MAX_TRIAL_RETRIES = 3
 
@@ -73,55 +77,39 @@ class Progress:
 
 
 class Conductor:
-    """The protocol's view of the running modules."""
+    """The protocol's view of the running modules, and where it publishes what it does."""
 
-    def __init__(
-        self,
-        plan: Plan,
-        supervisor: Supervisor,
-        writer: RecordWriter,
-        rerun_log,
-        run_dir: Path,
-        on_progress: Callable[[Progress], None] | None = None,
-    ) -> None:
+    def __init__(self, plan: Plan, modules: ModuleService, events: Events, run_dir: Path) -> None:
         self.plan = plan
-        self.sup = supervisor
-        self.writer = writer
-        self.rr = rerun_log
+        self.modules = modules
+        self.events = events
         self.run_dir = run_dir
-        self.on_progress = on_progress or (lambda p: None)
         self.providers = plan.providers
 
     def call(self, message: m.Message) -> m.Message:
         return self.call_all(message)[0]
 
-    def record_trial(self, progress: Progress, row: dict) -> None:
-        """One trial row: to the records, to Rerun, and to whoever shows progress."""
-        self.writer.write(row)
-        self.rr.trial(row)
-        progress.last = row
-        self.on_progress(progress)
-
     def call_all(self, *messages: m.Message) -> list[m.Message]:
         """Send independent requests at once (to different modules) and wait for every reply."""
         timeout = self.plan.scenario.timeouts.request
-        tokens = [self.sup.submit(self.providers[msg.TAG], msg, timeout) for msg in messages]
-        results: dict[int, object] = {}
-        while len(results) < len(tokens):
-            results.update(self.sup.wait_any([t for t in tokens if t not in results]))
+        tickets = [self.modules.submit(self.providers[msg.TAG], msg, timeout) for msg in messages]
+        outcomes: dict[int, object] = {}
+        while len(outcomes) < len(tickets):
+            outcomes.update(self.modules.wait_any([t for t in tickets if t not in outcomes]))
         replies = []
-        for token in tokens:
-            result = results[token]
-            if isinstance(result, Exception):
-                raise RunError(str(result)) from None
-            replies.append(result)
+        for ticket in tickets:
+            outcome = outcomes[ticket]
+            if isinstance(outcome, Exception):  # a brain module's request is never retried
+                raise RunError(str(outcome)) from None
+            replies.append(outcome)
         return replies
 
     def trials(self, requests: Iterable[m.TrialRequest]) -> Iterator[tuple[m.TrialRequest, m.TrialResult, float]]:
         """Run trials on the body workers, each worker busy with one at a time.
 
-        Yields (request, result, wall seconds) as trials complete. A trial interrupted by a
-        body or controller crash is sent again (to any live worker), not counted as a failure.
+        Yields (request, result, wall seconds) as trials complete. A trial :class:`Interrupted` by a
+        body or controller crash is sent again (to any live worker), not counted as a failure, up to
+        ``MAX_TRIAL_RETRIES`` times; any other fault ends the run.
         """
         todo = deque(requests)
         busy: dict[int, tuple[str, m.TrialRequest, float]] = {}
@@ -130,31 +118,54 @@ class Conductor:
         deadline_no_worker = None
         while todo or busy:
             in_use = {w for w, _, _ in busy.values()}
-            idle = [w for w in self.sup.workers() if w not in in_use]
+            idle = [w for w in self.modules.workers() if w not in in_use]
             while todo and idle:
                 worker = idle.pop(0)
                 request = todo.popleft()
-                token = self.sup.submit(worker, request, timeout)
-                busy[token] = (worker, request, time.perf_counter())
+                ticket = self.modules.submit(worker, request, timeout)
+                busy[ticket] = (worker, request, time.perf_counter())
             if not busy:
                 deadline_no_worker = deadline_no_worker or time.monotonic() + self.plan.scenario.timeouts.ready
                 if time.monotonic() > deadline_no_worker:
                     raise RunError("no body worker is alive to run trials")
-                self.sup._handle(self.sup._next_event(0.5))
+                self.modules.wait_for_workers(0.5)
                 continue
             deadline_no_worker = None
-            for token, result in self.sup.wait_any(list(busy)):
-                worker, request, started = busy.pop(token)
-                if isinstance(result, Interrupted):
+            for ticket, outcome in self.modules.wait_any(list(busy)):
+                worker, request, started = busy.pop(ticket)
+                if isinstance(outcome, Interrupted):
                     retries[request.trial_id] += 1
                     if retries[request.trial_id] > MAX_TRIAL_RETRIES:
-                        raise RunError(f"trial {request.trial_id} interrupted {MAX_TRIAL_RETRIES + 1} times: {result}")
-                    print(f"sfl: trial {request.trial_id} interrupted ({result}); retrying", flush=True)
+                        raise RunError(f"trial {request.trial_id} interrupted {MAX_TRIAL_RETRIES + 1} times: {outcome}")
+                    self.events.publish(TrialInterrupted(request.trial_id, str(outcome), retries[request.trial_id]))
                     todo.appendleft(request)
                     continue
-                if isinstance(result, Exception):
-                    raise RunError(str(result))
-                yield request, result, time.perf_counter() - started
+                if isinstance(outcome, Exception):
+                    raise RunError(str(outcome))
+                yield request, outcome, time.perf_counter() - started
+
+    def record_decisions(self, rows: list[dict]) -> None:
+        self.events.publish(DecisionsMade(rows))
+
+    def record_trial(
+        self,
+        progress: Progress,
+        trial: int,
+        result: m.TrialResult,
+        wall: float,
+        point: dict | None = None,
+        learning: dict | None = None,
+    ) -> None:
+        """Count a finished trial in ``progress`` and publish its row, then the progress."""
+        progress.trials += 1
+        progress.successes += int(result.success)
+        row = trial_row(trial, result, wall, progress.successes / progress.trials, point, learning)
+        progress.last = row
+        self.events.publish(TrialRecorded(row))
+        self.events.publish(ProgressUpdated(progress))
+
+    def report_progress(self, progress: Progress) -> None:
+        self.events.publish(ProgressUpdated(progress))
 
     def trial_request(self, trial_id: int, unit: np.ndarray, log: bool) -> m.TrialRequest:
         physical = self.plan.to_physical(unit)
@@ -170,8 +181,9 @@ class Conductor:
         every = self.plan.scenario.record.body_every
         return every > 0 and trial_id % every == 0
 
-    def physical_row(self, unit: np.ndarray) -> dict:
-        return {a.name: a.to_physical(u) for a, u in zip(self.plan.scenario.space, unit, strict=True)}
+    def point(self, unit: np.ndarray) -> dict:
+        """The record fields of a point of the parameter space (unit and physical coordinates)."""
+        return point_fields(self.plan.scenario.space, unit)
 
 
 def run_learn(c: Conductor) -> dict:
@@ -220,18 +232,17 @@ def run_learn(c: Conductor) -> dict:
         used = 0
         for i in range(batch):
             go = bool(evaluation.go[i])
-            row = {
-                "kind": "decision",
-                "decision": decision,
-                "trial": progress.trials if go else None,
-                "go": go,
-                "s_vig": threshold.s_vig,
-                "d_success": float(evaluation.d_success[i]),
-                "d_failure": float(evaluation.d_failure[i]),
-                "v_unit": candidates[i].tolist(),
-                **c.physical_row(candidates[i]),
-            }
-            rows.append(row)
+            rows.append(
+                decision_row(
+                    decision,
+                    progress.trials if go else None,
+                    go,
+                    threshold.s_vig,
+                    evaluation.d_success[i],
+                    evaluation.d_failure[i],
+                    c.point(candidates[i]),
+                )
+            )
             decision += 1
             used = i + 1
             if go:
@@ -245,13 +256,11 @@ def run_learn(c: Conductor) -> dict:
             if decision >= proto.max_decisions or consecutive_nogo >= proto.stall_decisions:
                 break
         pool = pool[used:]
-        if c.plan.scenario.record.decisions:
-            c.writer.write_many(rows)
-        c.rr.decisions(rows)
+        c.record_decisions(rows)
         progress.decisions = decision
         progress.consecutive_nogo = consecutive_nogo
         if chosen is None:
-            c.on_progress(progress)  # a long run of no-go decisions shows (and warns) while it lasts
+            c.report_progress(progress)  # a long run of no-go decisions shows (and warns) while it lasts
         if chosen is None:  # no go in the whole batch: look further ahead next time
             batch = min(proto.batch, 2 * batch)
         else:
@@ -279,34 +288,22 @@ def run_learn(c: Conductor) -> dict:
             m.Learn(v=v, success=result.success, rho=rho if rho is not None else 1.0),
             m.TrialDone(trial_index=trial_id + 1, success=result.success, n_success=n_success, n_failure=n_failure),
         )
-        progress.trials += 1
-        progress.successes = n_success
         progress.s_vig = threshold.s_vig
         trial_decisions.append(decision - decisions_at_last_trial)
         decisions_at_last_trial = decision
         progress.recent_decisions_per_trial = sum(trial_decisions) / len(trial_decisions)
-        row = {
-            "kind": "trial",
-            "trial": trial_id,
+        learning = {
             "decision": decision - 1,
-            "success": result.success,
-            "quality": result.quality,
             "rho": rho,
             "n_success": n_success,
             "n_failure": n_failure,
             "ns_nf": n_success / n_failure if n_failure else None,
-            "success_rate": n_success / progress.trials,
             "s_vig": s_vig_used,
             "band_low": low,
             "band_high": high,
             "map_change": learned.change,
-            "worker": result.worker,
-            "wall_ms": wall * 1e3,
-            "v_unit": v.tolist(),
-            **c.physical_row(v),
-            **{f"m_{k}": val for k, val in result.metrics.items()},
         }
-        c.record_trial(progress, row)
+        c.record_trial(progress, trial_id, result, wall, c.point(v), learning)
     finish: m.Ack = c.call(m.Finish(path=str((c.run_dir / "acc.npz").resolve()), prune=proto.prune_failure_map))
     return {
         "planned_trials": proto.trials,
@@ -328,22 +325,7 @@ def run_sweep(c: Conductor) -> dict:
     progress = Progress(planned=len(points))
     requests = (c.trial_request(i, p, c.should_log_body(i)) for i, p in enumerate(points))
     for request, result, wall in c.trials(requests):
-        unit = points[request.trial_id]
-        progress.trials += 1
-        progress.successes += int(result.success)
-        row = {
-            "kind": "trial",
-            "trial": request.trial_id,
-            "success": result.success,
-            "quality": result.quality,
-            "worker": result.worker,
-            "wall_ms": wall * 1e3,
-            "v_unit": unit.tolist(),
-            "success_rate": progress.successes / progress.trials,
-            **c.physical_row(unit),
-            **{f"m_{k}": val for k, val in result.metrics.items()},
-        }
-        c.record_trial(progress, row)
+        c.record_trial(progress, request.trial_id, result, wall, c.point(points[request.trial_id]))
     return {"planned_trials": len(points), "stop_reason": f"every grid point run ({len(points)})"}
 
 
@@ -375,19 +357,7 @@ def run_exploit(c: Conductor) -> dict:
             log=c.should_log_body(trial_id),
         )
         ((_, result, wall),) = c.trials([request])
-        progress.trials += 1
-        progress.successes += int(result.success)
-        row = {
-            "kind": "trial",
-            "trial": trial_id,
-            "success": result.success,
-            "quality": result.quality,
-            "worker": result.worker,
-            "wall_ms": wall * 1e3,
-            "success_rate": progress.successes / progress.trials,
-            **{f"m_{k}": val for k, val in result.metrics.items()},
-        }
-        c.record_trial(progress, row)
+        c.record_trial(progress, trial_id, result, wall)
     return {
         "planned_trials": proto.trials,
         "stop_reason": f"trial budget spent ({proto.trials} trials)",

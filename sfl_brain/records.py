@@ -23,6 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from .events import DecisionsMade, Events, TrialRecorded
+from .messages import TrialResult
 from .status import EnvironmentProblem
 
 SUMMARY_FIELDS = (
@@ -85,6 +87,58 @@ class RecordWriter:
             self._file.close()
         except OSError:  # the last flush failed (full disk): what was written before stays
             pass
+
+
+def point_fields(axes, unit: np.ndarray) -> dict:
+    """Where a point of the parameter space is: ``v_unit`` (unit coordinates) and each axis's physical value."""
+    return {"v_unit": unit.tolist(), **{a.name: a.to_physical(u) for a, u in zip(axes, unit, strict=True)}}
+
+
+def decision_row(decision: int, trial: int | None, go: bool, s_vig: float, d_success, d_failure, point: dict) -> dict:
+    """One ``kind: decision`` row: the go/no-go of candidate ``point`` (:func:`point_fields`) against
+    ``s_vig``, with its distances to the success and failure maps; ``trial`` is the trial a go starts."""
+    return {
+        "kind": "decision",
+        "decision": decision,
+        "trial": trial,
+        "go": go,
+        "s_vig": s_vig,
+        "d_success": float(d_success),
+        "d_failure": float(d_failure),
+        **point,
+    }
+
+
+def trial_row(
+    trial: int,
+    result: TrialResult,
+    wall_s: float,
+    success_rate: float,
+    point: dict | None = None,
+    learning: dict | None = None,
+) -> dict:
+    """One ``kind: trial`` row: the outcome, the worker and its wall time, the success rate so far,
+    where it was tried (``point``, :func:`point_fields`; none for the exploit walk), the learning
+    state after it (``learning``: learn protocol) and the body's metrics as ``m_<name>``."""
+    return {
+        "kind": "trial",
+        "trial": trial,
+        "success": result.success,
+        "quality": result.quality,
+        "worker": result.worker,
+        "wall_ms": wall_s * 1e3,
+        "success_rate": success_rate,
+        **(learning or {}),
+        **(point or {}),
+        **{f"m_{k}": v for k, v in result.metrics.items()},
+    }
+
+
+def record_to(events: Events, writer: RecordWriter, decisions: bool = True) -> None:
+    """Write the rows a protocol publishes: every trial, and the decisions if ``decisions`` (``record.decisions``)."""
+    events.subscribe(TrialRecorded, lambda event: writer.write(event.row))
+    if decisions:
+        events.subscribe(DecisionsMade, lambda event: writer.write_many(event.rows))
 
 
 def read_records(run_dir: Path, damage: list[str] | None = None) -> list[dict]:

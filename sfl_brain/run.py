@@ -1,5 +1,10 @@
 """``sfl run``: launch a validated plan, run its protocol, and leave a complete run folder.
 
+The run wires the parts together: the :class:`~sfl_brain.runtime.Supervisor` hosts the modules
+and publishes their lifecycle; the protocol publishes its decisions, trials and progress; the run
+subscribes the records, the Rerun log, the progress callback and the terminal lines to those
+:mod:`~sfl_brain.events`.
+
 The run's status is decided here (see :mod:`sfl_brain.status`): ``completed`` only when the
 protocol ran its whole budget, ``stalled`` when it stopped early on its own, ``failed`` when a
 module or the machine let it down, ``interrupted`` on Ctrl-C / SIGTERM. Whatever happens, the
@@ -28,11 +33,26 @@ from pathlib import Path
 
 import yaml
 
+from .events import (
+    DecisionsMade,
+    Events,
+    ModuleAlive,
+    ModuleDied,
+    ModuleSilent,
+    ProgressUpdated,
+    Restarted,
+    TrialInterrupted,
+    TrialRecorded,
+    WorkerJoined,
+    WorkerLeft,
+)
+from .processes import kill_quietly
 from .protocols import PROTOCOLS, Conductor, Progress
-from .records import RecordWriter, read_records, summarise
+from .records import RecordWriter, read_records, record_to, summarise
 from .rrlog import RerunLog
-from .runtime import RunError, Supervisor, kill_quietly
+from .runtime import Supervisor
 from .scenario import Plan
+from .service import RunError
 from .status import EXIT_CODES, EXIT_ENVIRONMENT, BadInput, EnvironmentProblem, RunStatus
 from .tables import write_tables
 
@@ -212,6 +232,27 @@ class _Terminate(Exception):
     pass
 
 
+def tell(events: Events) -> None:
+    """Say what happens to the modules and trials: on the terminal what the user must see, the rest to the log."""
+
+    def restarted(e: Restarted) -> None:
+        log.warning("module %s exited with code %s: restart %d/%d", e.name, e.exit_code, e.restart, e.max_restarts)
+        print(
+            f"sfl: module `{e.name}` died (exit code {e.exit_code}); restarting ({e.restart}/{e.max_restarts})",
+            file=sys.stderr,
+        )
+
+    events.subscribe(Restarted, restarted)
+    events.subscribe(
+        TrialInterrupted, lambda e: print(f"sfl: trial {e.trial} interrupted ({e.reason}); retrying", flush=True)
+    )
+    events.subscribe(ModuleAlive, lambda e: log.info("%s is alive", e.name))
+    events.subscribe(WorkerJoined, lambda e: log.info("external worker %s joined", e.name))
+    events.subscribe(WorkerLeft, lambda e: log.warning("external worker %s left", e.name))
+    events.subscribe(ModuleSilent, lambda e: log.warning("%s went silent (lease expired): killing it", e.name))
+    events.subscribe(ModuleDied, lambda e: log.error("module %s died with exit code %s", e.name, e.exit_code))
+
+
 def run(
     plan: Plan,
     out: Path | None = None,
@@ -243,6 +284,7 @@ def run(
     (run_dir / "provenance.json").write_text(json.dumps(provenance(), indent=2) + "\n")
     (run_dir / "started").write_text(datetime.now().isoformat() + "\n")
     writer = RecordWriter(run_dir / "records.jsonl")
+    events = Events()
     sup = Supervisor(
         plan,
         run_dir,
@@ -252,6 +294,7 @@ def run(
         viewer=viewer_url,
         realtime=realtime,
         zenoh_config=zenoh_config,
+        events=events,
     )
     (run_dir / "rerun").mkdir(exist_ok=True)
     rr_log = RerunLog(
@@ -260,6 +303,12 @@ def run(
         viewer_url,
         [a.name for a in plan.scenario.space],
     )
+    record_to(events, writer, decisions=plan.scenario.record.decisions)
+    events.subscribe(DecisionsMade, lambda e: rr_log.decisions(e.rows))
+    events.subscribe(TrialRecorded, lambda e: rr_log.trial(e.row))
+    if on_progress is not None:
+        events.subscribe(ProgressUpdated, lambda e: on_progress(e.progress))
+    tell(events)
     started = time.perf_counter()
     status, reason, exit_code, extra = RunStatus.COMPLETED, "", None, {}
     stopping = {"signals": 0, "cleaning": False}
@@ -282,7 +331,7 @@ def run(
             sup.start()
             if on_ready:
                 on_ready(sup, time.perf_counter() - started)
-            conductor = Conductor(plan, sup, writer, rr_log, run_dir, on_progress)
+            conductor = Conductor(plan, sup, events, run_dir)
             extra = PROTOCOLS[plan.scenario.protocol.kind](conductor)
         except (KeyboardInterrupt, _Terminate):
             status, reason = RunStatus.INTERRUPTED, "stopped by signal (Ctrl-C or SIGTERM)"

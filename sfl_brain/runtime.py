@@ -1,11 +1,19 @@
-"""The supervisor: start one process per module, watch them, route requests, stop them all.
+"""The supervisor: the run's modules as processes on a Zenoh mesh, behind the protocols' request surface.
 
-``Supervisor`` owns the child processes and a Zenoh session. Everything that can
-happen while a protocol waits (a reply, a module coming alive or going silent, a
-process exiting) arrives on one event queue, so waiting for a reply also notices a
-dead module at once instead of at a time-out. Bodies and controllers may be
-restarted by policy (they hold no state between trials); a trial they were running
-is retried. A brain module that dies ends the run with its name and log tail.
+:class:`Supervisor` implements :class:`~sfl_brain.service.ModuleService` over Zenoh. It starts one
+process per module (:mod:`sfl_brain.processes`), watches their liveliness tokens, sends requests
+and applies the restart policy. Everything that can happen while a protocol waits (a reply, a
+module coming alive or going silent, a process exiting) is a typed value on one queue, handled in
+the waiting thread, so waiting for a reply also notices a dead module at once instead of at a
+time-out. Zenoh callbacks only put on that queue.
+
+Faults are types. A request whose target exits, leaves, or answers with a :class:`~sfl_brain.host.LinkError`
+(its controller died or hung mid-trial) ends :class:`~sfl_brain.service.Interrupted`: the protocol may
+send it again. Bodies and controllers may be restarted by policy (they hold no state between
+trials); a brain module that dies ends the run with :class:`~sfl_brain.service.RunError`, naming it
+with its log tail. What the supervisor sees is published on :attr:`Supervisor.events`
+(:class:`~sfl_brain.events.ModuleAlive`, :class:`~sfl_brain.events.Restarted`, ...); the run decides
+what to show of it.
 
 Each run has a secret (``Supervisor.secret``), handed to the children on their stdin with the
 rest of their spec: their sessions authenticate each other with it, requests and replies are
@@ -18,77 +26,79 @@ joined with ``sfl worker`` stops when it goes away.
 from __future__ import annotations
 
 import itertools
-import json
 import logging
 import os
 import queue
-import signal
-import subprocess
-import sys
-import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import zenoh
 
-from . import bus
+from . import bus, processes
+from .body import Body, Controller
+from .events import Events, ModuleAlive, ModuleDied, ModuleSilent, Restarted, WorkerJoined, WorkerLeft
+from .host import LinkError
 from .messages import Message, MessageError, NonFiniteError, decode, encode
 from .placement import assign, usable_cpus
+from .processes import Child, Exited, kill_quietly, log_tail
 from .scenario import Instance, Plan
+from .service import Interrupted, Outcome, RunError
 from .status import EnvironmentProblem
+
+__all__ = ["RUN_TOKEN", "Interrupted", "RunError", "Supervisor", "hosted_spec", "kill_quietly", "log_tail"]
 
 log = logging.getLogger("sfl.runtime")
 
+#: the instance name of the supervisor's own liveliness token
+RUN_TOKEN = "@run"
 
-class RunError(RuntimeError):
-    """The run cannot go on (a module died, did not start, or failed a request)."""
-
-
-class Interrupted(RuntimeError):
-    """A request whose target died before answering (the request may be retried)."""
+#: exception types a module host names in an error reply that mean "cut short, send it again"
+RETRYABLE = frozenset({LinkError.__name__})
 
 
-@dataclass
-class Child:
-    instance: Instance
-    log_path: Path
-    proc: subprocess.Popen | None = None
-    restarts: int = 0
-    alive: bool = False
-    stopping: bool = False
-    generation: int = 0
-    nonce: str = ""  # of the current spawn: its liveliness token must carry it
+# ---------------------------------------------------------------- what arrives on the supervisor's queue
+@dataclass(frozen=True)
+class TokenDeclared:
+    """A liveliness token with a valid proof: ``nonce`` is the spawn it was made for."""
 
-    @property
-    def name(self) -> str:
-        return self.instance.name
+    name: str
+    nonce: str
+
+
+@dataclass(frozen=True)
+class TokenGone:
+    name: str
+    nonce: str
+
+
+@dataclass(frozen=True)
+class Replied:
+    """A signed reply (or error reply) to request ``ticket``."""
+
+    ticket: int
+    outcome: Outcome
+
+
+@dataclass(frozen=True)
+class QueryEnded:
+    """Zenoh finished request ``ticket`` (after its replies, or at its time-out without one)."""
+
+    ticket: int
 
 
 @dataclass
 class Pending:
     target: str
     message: Message
-    result: object = None
+    outcome: Outcome | None = None
     done: bool = False
-    extra: dict = field(default_factory=dict)
 
 
-def log_tail(path: Path, lines: int = 12) -> str:
-    try:
-        text = path.read_text(errors="replace").splitlines()
-    except OSError:
-        return ""
-    return "\n".join("    " + line for line in text[-lines:])
-
-
-def _exits_soon(proc: subprocess.Popen, grace: float = 1.0) -> bool:
-    """True if the process has exited or exits within ``grace`` s (its sockets close before it is reaped)."""
-    try:
-        proc.wait(timeout=grace)
-        return True
-    except subprocess.TimeoutExpired:
-        return False
+def remote_fault(target: str, tag: str, text: str) -> RunError | Interrupted:
+    """The fault of an error reply ``text`` (``ExceptionType: detail``, as the host sends it)."""
+    fault = Interrupted if text.partition(":")[0] in RETRYABLE else RunError
+    return fault(f"`{target}` failed on `{tag}`: {text}")
 
 
 def hosted_spec(inst: Instance | None) -> dict | None:
@@ -112,6 +122,7 @@ class Supervisor:
         record: bool = True,
         zenoh_config: str | Path | None = None,
         secret: str | None = None,
+        events: Events | None = None,
     ) -> None:
         self.plan = plan
         self.run_dir = run_dir
@@ -122,10 +133,12 @@ class Supervisor:
         self.viewer = viewer
         self.realtime = realtime
         self.record = record
-        self.events: queue.SimpleQueue = queue.SimpleQueue()
+        #: the lifecycle and faults of the run's modules, published as they are handled
+        self.events = events or Events()
+        self._inbox: queue.SimpleQueue = queue.SimpleQueue()
         self.children: dict[str, Child] = {}
         self.pending: dict[int, Pending] = {}
-        self._tokens = itertools.count()
+        self._tickets = itertools.count()
         self.session: zenoh.Session | None = None
         self._liveliness = None
         self.external_workers: list[str] = []
@@ -220,28 +233,7 @@ class Supervisor:
         child.nonce = os.urandom(8).hex()
         spec = self.spec_for(child.instance)
         spec["nonce"] = child.nonce
-        logf = open(child.log_path, "ab")  # noqa: SIM115 - handed to the child
-        child.generation += 1
-        child.alive = False
-        child.proc = subprocess.Popen(
-            [sys.executable, "-m", "sfl_brain.host", "--name", child.name],  # the name only, for ps
-            stdin=subprocess.PIPE,
-            stdout=logf,
-            stderr=subprocess.STDOUT,
-            start_new_session=True,  # Ctrl-C reaches the supervisor only; it stops the children
-        )
-        logf.close()
-        try:  # the spec (with the secret) on stdin, never on the command line; stdin stays open
-            child.proc.stdin.write(json.dumps(spec).encode() + b"\n")
-            child.proc.stdin.flush()
-        except OSError:  # it died at once: its exit event reports it
-            pass
-        generation = child.generation
-        threading.Thread(target=self._wait_exit, args=(child, child.proc, generation), daemon=True).start()
-
-    def _wait_exit(self, child: Child, proc: subprocess.Popen, generation: int) -> None:
-        code = proc.wait()
-        self.events.put(("exit", child.name, code, generation))
+        processes.start(child, spec, self._inbox.put)
 
     def _on_liveliness(self, sample: zenoh.Sample) -> None:
         name, proof = bus.parse_alive_key(sample.key_expr)
@@ -249,32 +241,12 @@ class Supervisor:
         if nonce is None:  # no proof, or a forged one
             self._drops("unauthenticated", "liveliness token", str(sample.key_expr))
             return
-        self.events.put(("alive" if sample.kind == zenoh.SampleKind.PUT else "gone", name, nonce))
+        kind = TokenDeclared if sample.kind == zenoh.SampleKind.PUT else TokenGone
+        self._inbox.put(kind(name, nonce))
 
     def stop(self, grace: float = 3.0) -> None:
-        """Stop every child: SIGTERM, then SIGKILL after ``grace`` seconds."""
-        procs = []
-        for child in self.children.values():
-            child.stopping = True
-            if child.proc is not None and child.proc.poll() is None:
-                try:
-                    child.proc.send_signal(signal.SIGTERM)
-                except ProcessLookupError:
-                    pass
-                procs.append(child.proc)
-        deadline = time.monotonic() + grace
-        for proc in procs:
-            try:
-                proc.wait(timeout=max(0.0, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-        for proc in procs:
-            if proc.stdin:
-                try:
-                    proc.stdin.close()
-                except OSError:
-                    pass
+        """Stop every child: SIGTERM, then SIGKILL after ``grace`` seconds; close the session."""
+        processes.stop_all(self.children.values(), grace)
         if self._liveliness is not None:
             self._liveliness.undeclare()
             self._liveliness = None
@@ -291,120 +263,112 @@ class Supervisor:
     # ------------------------------------------------------------------ events
     def _next_event(self, timeout: float | None):
         try:
-            return self.events.get(timeout=timeout)
+            return self._inbox.get(timeout=timeout)
         except queue.Empty:
             return None
 
     def _handle(self, event, starting: bool = False) -> None:
-        if event is None:
-            return
-        kind = event[0]
-        if kind in ("reply", "drop"):
-            token = event[1]
-            pending = self.pending.get(token)
-            if pending is None or pending.done:
-                return
-            if kind == "reply":
-                pending.result = event[2]
-            elif pending.result is None:
-                child = self.children.get(pending.target)
-                if child is not None and child.proc is not None and _exits_soon(child.proc):
-                    return  # it died mid-request: its exit event decides (interrupt and restart, or fail)
-                if child is None and pending.target in self.external_workers:
-                    pending.result = Interrupted(f"worker `{pending.target}` did not answer")
-                elif pending.target in self.plan.bodies:
-                    # a body worker that is alive but whose trial got no reply (its link to us dropped
-                    # under load): the trial is lost, not the run; it is retried like a crash
-                    pending.result = Interrupted(f"no reply from body worker `{pending.target}`")
-                else:
-                    pending.result = RunError(f"no reply from `{pending.target}` to `{pending.message.TAG}`")
-            pending.done = kind == "drop" or pending.result is not None
-            return
-        name = event[1]
-        child = self.children.get(name)
-        if kind in ("alive", "gone") and name == RUN_TOKEN:
-            return  # our own token (or another supervisor's of this run id)
-        if kind == "alive":
-            nonce = event[2]
-            if child is not None:
-                if nonce != child.nonce:  # signed, but not by the process we spawned last
-                    self._drops("stale", "liveliness token", f"{name} with the nonce of another spawn")
-                    return
-                child.alive = True
-                log.info("%s is alive", name)
-            elif not name.startswith(self.plan.body_spec + "."):
-                self._drops("foreign", "liveliness token", f"{name} is no module of this run")
-            elif name in self.external_workers:
-                if nonce != self._external_nonces.get(name):
-                    self._drops("stale", "worker registration", f"{name} is already registered")
-            else:
-                self.external_workers.append(name)  # a worker joined from elsewhere (sfl worker)
-                self._external_nonces[name] = nonce
-                log.info("external worker %s joined", name)
-            return
-        if kind == "gone":
-            nonce = event[2]
-            if child is None:
-                if name in self.external_workers and nonce == self._external_nonces.get(name):
-                    self.external_workers.remove(name)
-                    del self._external_nonces[name]
-                    self._interrupt(name, f"worker `{name}` left")
-                return
-            if child.stopping or nonce != child.nonce:  # a previous spawn's token going away
-                return
-            child.alive = False
-            if child.proc is not None and child.proc.poll() is None:
-                log.warning("%s went silent (lease expired): killing it", name)
-                child.proc.kill()
-            return
-        if kind == "exit":
-            code, generation = event[2], event[3]
-            if child is None or child.stopping or generation != child.generation:
-                return
-            child.alive = False
-            self._interrupt(name, f"module `{name}` exited with code {code}")
-            kind_of = child.instance.cls
-            from .body import Body, Controller
+        match event:
+            case Replied(ticket, outcome):
+                pending = self.pending.get(ticket)
+                if pending is not None and not pending.done:
+                    pending.outcome, pending.done = outcome, True
+            case QueryEnded(ticket):
+                self._query_ended(ticket)
+            case TokenDeclared(name, nonce):
+                self._token_declared(name, nonce)
+            case TokenGone(name, nonce):
+                self._token_gone(name, nonce)
+            case Exited(name, exit_code, generation):
+                self._exited(name, exit_code, generation, starting)
 
-            restartable = issubclass(kind_of, Body | Controller)
-            if child.instance.restart == "on-failure" and restartable and child.restarts < child.instance.max_restarts:
-                child.restarts += 1
-                log.warning(
-                    "module %s exited with code %s: restart %d/%d",
-                    name,
-                    code,
-                    child.restarts,
-                    child.instance.max_restarts,
-                )
-                print(
-                    f"sfl: module `{name}` died (exit code {code}); restarting "
-                    f"({child.restarts}/{child.instance.max_restarts})",
-                    file=sys.stderr,
-                )
-                self._spawn(child)
+    def _query_ended(self, ticket: int) -> None:
+        pending = self.pending.get(ticket)
+        if pending is None or pending.done:
+            return
+        child = self.children.get(pending.target)
+        if child is not None and child.proc is not None and processes.exits_soon(child.proc):
+            return  # it died mid-request: its Exited decides (interrupt and restart, or fail)
+        if child is None and pending.target in self.external_workers:
+            pending.outcome = Interrupted(f"worker `{pending.target}` did not answer")
+        elif pending.target in self.plan.bodies:
+            # a body worker that is alive but whose trial got no reply (its link to us dropped
+            # under load): the trial is lost, not the run; it is retried like a crash
+            pending.outcome = Interrupted(f"no reply from body worker `{pending.target}`")
+        else:
+            pending.outcome = RunError(f"no reply from `{pending.target}` to `{pending.message.TAG}`")
+        pending.done = True
+
+    def _token_declared(self, name: str, nonce: str) -> None:
+        if name == RUN_TOKEN:
+            return  # our own token (or another supervisor's of this run id)
+        child = self.children.get(name)
+        if child is not None:
+            if nonce != child.nonce:  # signed, but not by the process we spawned last
+                self._drops("stale", "liveliness token", f"{name} with the nonce of another spawn")
                 return
-            raise RunError(
-                f"module `{name}` ({child.instance.reference}) died with exit code {code}"
-                f"{' before it was ready' if starting else ''}; its log ({child.log_path}):\n"
-                f"{log_tail(child.log_path)}"
-            )
+            child.alive = True
+            self.events.publish(ModuleAlive(name))
+        elif not name.startswith(self.plan.body_spec + "."):
+            self._drops("foreign", "liveliness token", f"{name} is no module of this run")
+        elif name in self.external_workers:
+            if nonce != self._external_nonces.get(name):
+                self._drops("stale", "worker registration", f"{name} is already registered")
+        else:
+            self.external_workers.append(name)  # a worker joined from elsewhere (sfl worker)
+            self._external_nonces[name] = nonce
+            self.events.publish(WorkerJoined(name))
+
+    def _token_gone(self, name: str, nonce: str) -> None:
+        if name == RUN_TOKEN:
+            return
+        child = self.children.get(name)
+        if child is None:
+            if name in self.external_workers and nonce == self._external_nonces.get(name):
+                self.external_workers.remove(name)
+                del self._external_nonces[name]
+                self._interrupt(name, f"worker `{name}` left")
+                self.events.publish(WorkerLeft(name))
+            return
+        if child.stopping or nonce != child.nonce:  # a previous spawn's token going away
+            return
+        child.alive = False
+        if child.proc is not None and child.proc.poll() is None:
+            self.events.publish(ModuleSilent(name))
+            child.proc.kill()
+
+    def _exited(self, name: str, exit_code: int, generation: int, starting: bool) -> None:
+        child = self.children.get(name)
+        if child is None or child.stopping or generation != child.generation:
+            return
+        child.alive = False
+        self._interrupt(name, f"module `{name}` exited with code {exit_code}")
+        inst = child.instance
+        restartable = issubclass(inst.cls, Body | Controller)  # no state between trials
+        if inst.restart == "on-failure" and restartable and child.restarts < inst.max_restarts:
+            child.restarts += 1
+            self.events.publish(Restarted(name, exit_code, child.restarts, inst.max_restarts))
+            self._spawn(child)
+            return
+        died = ModuleDied(name, inst.reference, exit_code, str(child.log_path), log_tail(child.log_path), starting)
+        self.events.publish(died)
+        raise RunError(died.describe())
 
     def _interrupt(self, name: str, why: str) -> None:
         affected = {name}
-        # a body's trial is lost when its controller dies
-        for inst_name, c in self.children.items():
-            if c.instance.routes.get("controller.sensors") == name:
-                affected.add(inst_name)
+        # a body's trial is lost when its controller dies (every module routes to the controller: only bodies drive it)
+        for body in self.plan.bodies:
+            if self.children[body].instance.routes.get("controller.sensors") == name:
+                affected.add(body)
         for pending in self.pending.values():
             if not pending.done and pending.target in affected:
-                pending.result = Interrupted(why)
-                pending.done = True
+                pending.outcome, pending.done = Interrupted(why), True
 
-    # ------------------------------------------------------------------ requests
+    # ------------------------------------------------------------------ requests (ModuleService)
     def submit(self, target: str, message: Message, timeout: float) -> int:
-        token = next(self._tokens)
-        self.pending[token] = Pending(target, message)
-        events, seal, drops = self.events, self.seal, self._drops
+        ticket = next(self._tickets)
+        self.pending[ticket] = Pending(target, message)
+        inbox, seal, drops = self._inbox, self.seal, self._drops
         key_expr = bus.key(self.run_id, target, message.TAG)
         nonce, payload = seal.seal_request(key_expr, encode(message))
 
@@ -415,32 +379,30 @@ class Supervisor:
                     drops("unauthenticated", "reply", f"to `{message.TAG}` on {key_expr}")
                     return
                 try:
-                    events.put(("reply", token, decode(data)))
+                    inbox.put(Replied(ticket, decode(data)))
                 except (MessageError, NonFiniteError) as exc:
-                    events.put(("reply", token, RunError(f"malformed reply from `{target}`: {exc}")))
+                    inbox.put(Replied(ticket, RunError(f"malformed reply from `{target}`: {exc}")))
             else:
                 data = seal.open_reply(nonce, reply.err.payload.to_bytes())
-                if data is None:  # Zenoh's own "Timeout" (the drop event decides), or a stranger's
+                if data is None:  # Zenoh's own "Timeout" (QueryEnded decides), or a stranger's
                     return
-                text = data.decode(errors="replace")
-                exc_type = Interrupted if text.startswith("LinkError") else RunError
-                events.put(("reply", token, exc_type(f"`{target}` failed on `{message.TAG}`: {text}")))
+                inbox.put(Replied(ticket, remote_fault(target, message.TAG, data.decode(errors="replace"))))
 
         self.session.get(
             key_expr,
-            zenoh.handlers.Callback(on_reply, lambda: events.put(("drop", token)), indirect=False),
+            zenoh.handlers.Callback(on_reply, lambda: inbox.put(QueryEnded(ticket)), indirect=False),
             payload=payload,
             timeout=timeout,
             target=zenoh.QueryTarget.ALL,
             consolidation=zenoh.ConsolidationMode.NONE,  # every reply as it comes: a stranger's cannot hold ours
         )
-        return token
+        return ticket
 
-    def wait_any(self, tokens: list[int], timeout: float | None = None) -> list[tuple[int, object]]:
-        """Block until at least one of ``tokens`` completes; return the completed (token, result)."""
+    def wait_any(self, tickets: list[int], timeout: float | None = None) -> list[tuple[int, Outcome]]:
+        """Block until at least one of ``tickets`` completes; return the completed (ticket, outcome)."""
         deadline = None if timeout is None else time.monotonic() + timeout
         while True:
-            done = [(t, self.pending[t].result) for t in tokens if self.pending[t].done]
+            done = [(t, self.pending[t].outcome) for t in tickets if self.pending[t].done]
             if done:
                 for t, _ in done:
                     del self.pending[t]
@@ -449,14 +411,6 @@ class Supervisor:
             if remaining is not None and remaining <= 0:
                 return []
             self._handle(self._next_event(0.5 if remaining is None else min(0.5, remaining)))
-
-    def wait_alive(self, name: str) -> None:
-        deadline = time.monotonic() + self.plan.scenario.timeouts.ready
-        child = self.children[name]
-        while not child.alive:
-            if time.monotonic() > deadline:
-                raise RunError(f"module `{name}` did not come back within {self.plan.scenario.timeouts.ready:g} s")
-            self._handle(self._next_event(0.5))
 
     def workers(self) -> list[str]:
         """Body workers that can run a trial now (launched and joined from elsewhere): alive, and
@@ -470,16 +424,9 @@ class Supervisor:
                 own.append(name)
         return own + list(self.external_workers)
 
+    def wait_for_workers(self, timeout: float) -> None:
+        """Handle what arrives within ``timeout`` s (one event): a module coming back, a worker joining."""
+        self._handle(self._next_event(timeout))
+
     def pids(self) -> list[int]:
         return [c.proc.pid for c in self.children.values() if c.proc is not None]
-
-
-#: the instance name of the supervisor's own liveliness token
-RUN_TOKEN = "@run"
-
-
-def kill_quietly(pid: int) -> None:
-    try:
-        os.kill(pid, signal.SIGKILL)
-    except ProcessLookupError:
-        pass

@@ -3,6 +3,7 @@ from __future__ import annotations
 import contextlib
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -40,13 +41,57 @@ def write_scenario(tmp_path):
     return write
 
 
-def wait_for(predicate, timeout: float = 60.0) -> bool:
+class Lines:
+    """A process's text stream, read line by line by a thread: wait for a line with a deadline."""
+
+    def __init__(self, stream) -> None:
+        self.lines: list[str] = []
+        self.ended = False
+        self._changed = threading.Condition()
+        threading.Thread(target=self._read, args=(stream,), daemon=True).start()
+
+    def _read(self, stream) -> None:
+        for line in stream:
+            with self._changed:
+                self.lines.append(line)
+                self._changed.notify_all()
+        with self._changed:
+            self.ended = True
+            self._changed.notify_all()
+
+    def expect(self, text: str, timeout: float) -> str:
+        """The first line holding ``text``, once it is read; AssertionError after ``timeout`` s or at the end."""
+        with self._changed:
+            self._changed.wait_for(lambda: self._find(text) is not None or self.ended, timeout)
+            line = self._find(text)
+        assert line is not None, f"no line with {text!r} within {timeout:g} s; read: {''.join(self.lines)!r}"
+        return line
+
+    def _find(self, text: str) -> str | None:
+        return next((line for line in self.lines if text in line), None)
+
+
+def poll_until(predicate, what: str, timeout: float = 60.0, proc: subprocess.Popen | None = None) -> None:
+    """Wait for ``predicate()`` where nothing announces it (a file growing): checked every 50 ms until
+    ``timeout`` s. AssertionError naming ``what`` at the deadline, or at once if ``proc`` ends first."""
     deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
+    while not predicate():
+        if proc is not None and proc.poll() is not None:
+            raise AssertionError(f"the process ended (code {proc.returncode}) before {what}")
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
         time.sleep(0.05)
-    return False
+
+
+def trials_recorded(run_dir: Path) -> int:
+    """Trial rows in a run folder's records so far."""
+    path = Path(run_dir) / "records.jsonl"
+    return path.read_bytes().count(b'"kind":"trial"') if path.exists() else 0
+
+
+def wait_for_trials(run_dir: Path, trials: int, proc: subprocess.Popen, timeout: float = 120.0) -> None:
+    """Wait until a running ``sfl run`` has recorded ``trials`` trials (the records file is all it shows)."""
+    poll_until(lambda: trials_recorded(run_dir) >= trials, f"{trials} trials in {run_dir}/records.jsonl", timeout, proc)
 
 
 @contextlib.contextmanager
@@ -72,27 +117,22 @@ def listening_run(scenario, out, *sets: str, modules: int, extra: tuple[str, ...
         text=True,
     )
     try:
-        line = proc.stdout.readline()
-        assert "run id" in line, line + proc.stderr.read() if proc.poll() is not None else line
+        line = Lines(proc.stdout).expect("run id", 120)
         run_id = line.split("run id ")[1].split(";")[0]
         secret = (Path(out) / "secret").read_text().strip()
         with bus.open_session(["tcp/127.0.0.1:0"], [endpoint]) as session:
-            # wait until this new peer sees every module of the run (gossip has reached it)
-            alive = bus.alive_key(run_id, "*", "*")
-
+            # wait until this new peer sees every module of the run (gossip has reached it), or the run ends
             names: set[str] = set()
-            watch = session.liveliness().declare_subscriber(
-                alive, lambda sample: names.add(bus.parse_alive_key(sample.key_expr)[0]), history=True
-            )
+            settled = threading.Event()
 
-            def seen():
-                if proc.poll() is not None:
-                    return True
-                replies = session.liveliness().get(alive, timeout=1.0)
-                names.update(bus.parse_alive_key(r.ok.key_expr)[0] for r in replies if r.ok)
-                return len(names) >= modules
+            def on_token(sample):
+                names.add(bus.parse_alive_key(sample.key_expr)[0])
+                if len(names) >= modules:
+                    settled.set()
 
-            assert wait_for(seen), "the run's modules did not all come alive"
+            threading.Thread(target=lambda: (proc.wait(), settled.set()), daemon=True).start()
+            watch = session.liveliness().declare_subscriber(bus.alive_key(run_id, "*", "*"), on_token, history=True)
+            assert settled.wait(60), f"the run's modules did not all come alive within 60 s (seen: {sorted(names)})"
             assert proc.poll() is None, "the run ended before its modules were seen: " + proc.stderr.read()
             watch.undeclare()
             yield types.SimpleNamespace(

@@ -9,16 +9,16 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
+import psutil
 import pytest
 
 from sfl_brain.protocols import Progress
 from sfl_brain.records import RecordWriter, inspect_run, read_records
 from sfl_brain.status import EnvironmentProblem
 
-from .conftest import ROOT, SCENARIOS, sfl, sfl_run, wait_for
+from .conftest import ROOT, SCENARIOS, sfl, sfl_run, wait_for_trials
 
 ANALYTIC = SCENARIOS / "analytic_learn.yaml"
 STALLING = ("modules.vigilance.params.value=1.5", "protocol.max_decisions=2000")
@@ -199,10 +199,13 @@ def test_a_second_ctrl_c_still_leaves_a_summary_whole_records_and_a_merged_recor
         text=True,
     )
     try:
-        records = out / "records.jsonl"
-        assert wait_for(lambda: records.exists() and b'"kind":"trial"' in records.read_bytes(), timeout=120)
+        wait_for_trials(out, 1, proc)
+        children = psutil.Process(proc.pid).children(recursive=True)
         proc.send_signal(signal.SIGINT)
-        time.sleep(0.05)  # the second Ctrl-C lands while the first one is being handled
+        # the first Ctrl-C is being handled once the module processes are stopped; the records,
+        # the recording and the summary are written after that, and the second Ctrl-C lands there
+        _, alive = psutil.wait_procs(children, timeout=30)
+        assert not alive, f"the first Ctrl-C did not stop {alive}"
         proc.send_signal(signal.SIGINT)
         _, stderr = proc.communicate(timeout=60)
     finally:
@@ -211,6 +214,7 @@ def test_a_second_ctrl_c_still_leaves_a_summary_whole_records_and_a_merged_recor
     assert "Traceback" not in stderr and "Aborted" not in stderr
     summary = summary_of(out)
     assert summary["status"] == "interrupted"
+    assert summary["stop_reason"].endswith("; stopped at once by a second signal")  # it was handled as such
     assert summary["exit_code"] == 130
     assert summary["trials"] >= 1
     assert (out / "recording.rrd").exists()
@@ -221,10 +225,8 @@ def test_a_second_ctrl_c_still_leaves_a_summary_whole_records_and_a_merged_recor
 
 def test_viewer_without_a_display_fails_fast_with_a_hint(tmp_path):
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
-    started = time.monotonic()
     done = sfl_run(ANALYTIC, tmp_path / "run", "protocol.trials=5", extra=("--viewer",), env=env, timeout=60)
     assert done.returncode == 4
-    assert time.monotonic() - started < 30  # it did not wait for a viewer that never comes
     assert done.stderr.startswith("sfl: --viewer needs a display (DISPLAY / WAYLAND_DISPLAY is not set)")
     assert "--viewer-url" in done.stderr
     assert not (tmp_path / "run").exists()  # nothing started

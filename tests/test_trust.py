@@ -7,6 +7,7 @@ import json
 import os
 
 import numpy as np
+import psutil
 import pytest
 
 from sfl_brain import bus
@@ -15,7 +16,7 @@ from sfl_brain.local import run_local
 from sfl_brain.records import read_records
 from sfl_brain.scenario import load
 
-from .conftest import SCENARIOS, listening_run, wait_for
+from .conftest import SCENARIOS, listening_run
 
 VOLATILE = {"wall_ms", "worker"}
 # a short walker run: 5 processes (body and controller apart), 300 ticks a trial
@@ -159,10 +160,12 @@ def test_a_peer_without_the_secret_is_answered_nothing(tmp_path):
             else:
                 with pytest.raises(RemoteError):
                     request(run.session, key_expr, m.Rejected(consecutive=0), 2.0, seal=seal)
+        modules = psutil.Process(run.proc.pid).children(recursive=True)
         run.proc.kill()  # its modules see their parent go (stdin closes) and exit
         run.proc.wait(timeout=30)
-    counters = out / "logs" / "vigilance.counters.json"
-    assert wait_for(counters.exists, timeout=30)  # written as the module exits
+        _, alive = psutil.wait_procs(modules, timeout=30)
+        assert not alive, f"modules still running after their run was killed: {alive}"
+    counters = out / "logs" / "vigilance.counters.json"  # written as the module exits
     assert json.loads(counters.read_text())["dropped"].get("unauthenticated", 0) >= 2
 
 
@@ -188,10 +191,11 @@ def test_a_signed_request_cannot_be_replayed_or_moved(tmp_path):
         # signed with another secret: the host refuses it, and its unsigned refusal is no reply to us
         with pytest.raises(NoReply):
             request(run.session, key_expr, m.Rejected(consecutive=0), 2.0, seal=bus.Seal("wrong"))
+        modules = psutil.Process(run.proc.pid).children(recursive=True)
         run.proc.kill()
         run.proc.wait(timeout=30)
-        logs = out / "logs"
-        assert wait_for(lambda: (logs / "vigilance.counters.json").exists() and (logs / "ofc.counters.json").exists())
+        _, alive = psutil.wait_procs(modules, timeout=30)  # each writes its counters as it exits
+        assert not alive, f"modules still running after their run was killed: {alive}"
     dropped = json.loads((out / "logs" / "vigilance.counters.json").read_text())["dropped"]
     assert dropped.get("stale", 0) >= 1
     assert json.loads((out / "logs" / "ofc.counters.json").read_text())["dropped"]["unauthenticated"] >= 1

@@ -9,7 +9,7 @@ import sys
 
 from sfl_brain import bus
 
-from .conftest import ROOT, SCENARIOS, listening_run, sfl, wait_for
+from .conftest import ROOT, SCENARIOS, Lines, listening_run, sfl
 
 SWEEP = SCENARIOS / "analytic_sweep.yaml"
 LEARN = SCENARIOS / "analytic_learn.yaml"
@@ -66,7 +66,7 @@ def test_worker_wrong_run_id_gives_up_and_ctrl_c_stops_a_waiting_worker(tmp_path
         assert wrong.wait(timeout=60) == 1
         assert "no run wrongid answered" in wrong.stderr.read()
         joined = worker(str(SWEEP), "--connect", run.endpoint, "--run-id", run.run_id, "--name", "x1", env=env)
-        assert wait_for(lambda: "joined run" in (joined.stdout.readline() or ""), 60)
+        Lines(joined.stdout).expect("joined run", 60)
         joined.send_signal(signal.SIGINT)
         assert joined.wait(timeout=30) == 130
         run.proc.kill()

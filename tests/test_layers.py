@@ -1,0 +1,192 @@
+"""The run's parts and what each may depend on (issue 14, part 4).
+
+Protocols talk to an abstract module service (:mod:`sfl_brain.service`), so they run with every
+module in one process without Zenoh, and over Zenoh unchanged. The supervisor decides restarts and
+retries from typed events, and publishes what happens as typed events.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import subprocess
+import sys
+
+import pytest
+
+from sfl_brain import messages as m
+from sfl_brain.events import (
+    Events,
+    ModuleAlive,
+    ModuleDied,
+    ProgressUpdated,
+    Restarted,
+    TrialInterrupted,
+    TrialRecorded,
+)
+from sfl_brain.local import LocalModules, run_local
+from sfl_brain.protocols import PROTOCOLS, Conductor
+from sfl_brain.scenario import load
+from sfl_brain.service import Interrupted, RunError
+
+from .conftest import ROOT, SCENARIOS
+
+LEARN = SCENARIOS / "analytic_learn.yaml"
+ZENOH_SIDE = ("zenoh", "sfl_brain.runtime", "sfl_brain.bus", "sfl_brain.host", "sfl_brain.processes")
+
+
+def stable(rows):
+    """Rows without their wall times."""
+    return [{k: v for k, v in r.items() if k != "wall_ms"} for r in rows]
+
+
+def python(code: str) -> subprocess.CompletedProcess:
+    """``code`` in a fresh interpreter (nothing imported yet), from the repository root."""
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=300)
+
+
+@pytest.mark.parametrize("module", ["sfl_brain.protocols", "sfl_brain.local", "sfl_brain.service", "sfl_brain.events"])
+def test_the_protocol_side_imports_nothing_of_zenoh_or_the_supervisor(module):
+    done = python(f"import json, sys, {module}; print(json.dumps(sorted(sys.modules)))")
+    assert done.returncode == 0, done.stderr
+    loaded = set(json.loads(done.stdout))
+    assert module in loaded
+    assert not loaded & set(ZENOH_SIDE), f"{module} imports {sorted(loaded & set(ZENOH_SIDE))}"
+
+
+def test_a_learning_run_in_one_process_works_without_zenoh():
+    """``import zenoh`` fails in that interpreter; the learn protocol runs all its trials anyway and
+    gives the records it gives here."""
+    code = (
+        "import sys, json; sys.modules['zenoh'] = None\n"
+        "from sfl_brain.local import run_local\n"
+        "from sfl_brain.scenario import load\n"
+        f"rows = run_local(load({str(LEARN)!r}, ['protocol.trials=8']))\n"
+        "print(json.dumps(rows))\n"
+    )
+    done = python(code)
+    assert done.returncode == 0, done.stderr
+    rows = json.loads(done.stdout)
+    assert sum(r["kind"] == "trial" for r in rows) == 8
+    assert stable(rows) == stable(run_local(load(LEARN, ["protocol.trials=8"])))
+
+
+class Flaky(LocalModules):
+    """In-process modules whose body worker is interrupted on trial ``trial``, ``times`` times."""
+
+    def __init__(self, plan, trial: int, times: int, fault=Interrupted) -> None:
+        super().__init__(plan)
+        self.trial, self.left, self.fault = trial, times, fault
+
+    def submit(self, target, message, timeout):
+        if isinstance(message, m.TrialRequest) and message.trial_id == self.trial and self.left:
+            self.left -= 1
+            ticket = self._next
+            self._next += 1
+            self._outcomes[ticket] = self.fault("the body worker went away")
+            return ticket
+        return super().submit(target, message, timeout)
+
+
+def run_over(modules, plan, run_dir):
+    """Run ``plan``'s protocol over ``modules``; return (the events it published, the trial rows)."""
+    events, seen = Events(), []
+    events.subscribe((TrialInterrupted, TrialRecorded, ProgressUpdated), seen.append)
+    PROTOCOLS[plan.scenario.protocol.kind](Conductor(plan, modules, events, run_dir))
+    return seen, [e.row for e in seen if isinstance(e, TrialRecorded)]
+
+
+def test_an_interrupted_trial_is_sent_again_and_the_records_do_not_show_it(tmp_path):
+    plan = load(LEARN, ["protocol.trials=6"])
+    seen, rows = run_over(Flaky(plan, trial=2, times=2), plan, tmp_path)
+    interrupted = [e for e in seen if isinstance(e, TrialInterrupted)]
+    assert [(e.trial, e.attempt) for e in interrupted] == [(2, 1), (2, 2)]
+    assert interrupted[0].reason == "the body worker went away"
+    _, clean = run_over(LocalModules(plan), plan, tmp_path)
+    assert stable(rows) == stable(clean)
+    # the progress is published after each recorded trial
+    kinds = [type(e) for e in seen if not isinstance(e, TrialInterrupted)]
+    assert kinds[-2:] == [TrialRecorded, ProgressUpdated] and kinds.count(TrialRecorded) == 6
+
+
+def test_a_trial_interrupted_too_often_or_failed_ends_the_run(tmp_path):
+    plan = load(LEARN, ["protocol.trials=6"])
+    with pytest.raises(RunError, match="trial 3 interrupted 4 times: the body worker went away"):
+        run_over(Flaky(plan, trial=3, times=99), plan, tmp_path)
+    with pytest.raises(RunError, match="^the body worker went away$"):  # a RunError is never retried
+        run_over(Flaky(plan, trial=3, times=1, fault=RunError), plan, tmp_path)
+
+
+def test_events_go_to_the_handlers_of_their_exact_type_in_order():
+    events, got = Events(), []
+    events.subscribe(ModuleAlive, lambda e: got.append(("first", e)))
+    events.subscribe((ModuleAlive, Restarted), lambda e: got.append(("second", e)))
+    events.publish(ModuleAlive("acc"))
+    events.publish(Restarted("body", -9, 1, 3))
+    events.publish(TrialInterrupted(0, "x", 1))  # nobody listens: nothing happens
+    assert got == [
+        ("first", ModuleAlive("acc")),
+        ("second", ModuleAlive("acc")),
+        ("second", Restarted("body", -9, 1, 3)),
+    ]
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        ModuleAlive("acc").name = "ofc"
+
+
+# ---------------------------------------------------------------- the supervisor's decisions (no processes)
+def supervisor(tmp_path, *sets):
+    """A supervisor of the walker (acc, vigilance, ofc, body, controller) whose children are made
+    up: nothing is spawned, a respawn is only counted."""
+    from sfl_brain.processes import Child
+    from sfl_brain.runtime import Supervisor
+
+    plan = load(SCENARIOS / "quickstart.yaml", list(sets))
+    sup = Supervisor(plan, tmp_path, "test")
+    published = []
+    sup.events.subscribe((ModuleDied, Restarted), published.append)
+    sup.spawned = []
+    sup._spawn = lambda child: (sup.spawned.append(child.name), setattr(child, "generation", child.generation + 1))
+    for inst in plan.instances:
+        sup.children[inst.name] = Child(inst, tmp_path / f"{inst.name}.log", generation=1, alive=True)
+    (tmp_path / "acc.log").write_text("acc ready\nsomething went wrong\n")
+    return sup, published
+
+
+def test_a_dead_controller_interrupts_its_bodys_trial_and_is_restarted_by_policy(tmp_path):
+    from sfl_brain.processes import Exited
+    from sfl_brain.runtime import Pending
+
+    sup, published = supervisor(tmp_path, "modules.controller.restart=on-failure")
+    sup.pending[7] = Pending("body", m.Rejected(consecutive=0))
+    sup.pending[8] = Pending("acc", m.Rejected(consecutive=0))
+    sup._handle(Exited("controller", 1, generation=0))  # an earlier start's exit: ignored
+    assert not sup.pending[7].done and not published
+    sup._handle(Exited("controller", -9, generation=1))
+    assert isinstance(sup.pending[7].outcome, Interrupted) and "`controller` exited with code -9" in str(
+        sup.pending[7].outcome
+    )
+    assert not sup.pending[8].done  # a brain module's request is not the controller's
+    assert published == [Restarted("controller", -9, 1, sup.children["controller"].instance.max_restarts)]
+    assert sup.spawned == ["controller"]
+
+
+def test_a_dead_brain_module_ends_the_run_naming_it(tmp_path):
+    from sfl_brain.processes import Exited
+
+    sup, published = supervisor(tmp_path, "modules.body.restart=on-failure")
+    with pytest.raises(RunError, match=r"module `acc` \(.*\) died with exit code -9; its log"):
+        sup._handle(Exited("acc", -9, generation=1))
+    assert sup.spawned == []
+    (died,) = published
+    assert isinstance(died, ModuleDied) and died.exit_code == -9 and "something went wrong" in died.log_tail
+
+
+def test_retry_is_decided_by_the_remote_fault_type():
+    from sfl_brain.host import LinkError
+    from sfl_brain.runtime import remote_fault
+
+    cut = remote_fault("body", "body.trial", f"{LinkError.__name__}: interrupted: no command for tick 5 within 1 s")
+    assert type(cut) is Interrupted
+    assert str(cut) == "`body` failed on `body.trial`: LinkError: interrupted: no command for tick 5 within 1 s"
+    failed = remote_fault("body", "body.trial", "ValueError: LinkError in a message is not a LinkError")
+    assert type(failed) is RunError
