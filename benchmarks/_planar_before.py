@@ -62,5 +62,7 @@ class PlanarBipedBefore(PlanarBiped):
         trunk_y = self.trunk.position.y
         if trunk_y < self.legs[0][1].position.y or trunk_y < self.legs[1][1].position.y:
             self.fell = True
-        if self._frames is not None:
-            self._record_frame(voltage)
+        if self._log is not None and self._tick % self._log_every == 0:
+            self._read_state()  # the links' x, y, angle for the picture (a logged trial only)
+            self._log.append(np.concatenate(((self._tick,), self.sense(), voltage, self._state[:, :3].ravel())))
+        self._tick += 1

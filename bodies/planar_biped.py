@@ -38,6 +38,7 @@ from pydantic import Field
 from sfl_brain.body import Body, BodyParams
 from sfl_brain.messages import TrialRequest
 from sfl_brain.signals import Signal
+from sfl_brain.telemetry import Strips2D, rates_of, series
 
 THIGH, SHANK, FOOT_R = 0.142, 0.125, 0.02
 GROUND_R = 0.01  # ground segments' radius: the surface is this far above the profile
@@ -46,8 +47,10 @@ TRUNK_W, TRUNK_H, TRUNK_UP = 0.10, 0.06, 0.04
 HIP_LIMITS = (math.radians(-70), math.radians(70))
 KNEE_LIMITS = (math.radians(-110), 0.0)
 # the walker's picture: points [trunk, hip, left knee, left foot, right knee, right foot] as three strips
-_WALKER_STRIPS = ([0, 1], [1, 2, 3], [1, 4, 5])
+# of three points (trunk centre to hip, twice the hip: strips of one length are sent as one array)
+_WALKER_STRIPS = np.array([[0, 1, 1], [1, 2, 3], [1, 4, 5]])
 _WALKER_COLORS = np.array([(90, 90, 90), (40, 110, 220), (230, 140, 30)], dtype=np.uint8)
+_GROUND_COLOR = np.array([(120, 100, 80)], dtype=np.uint8)
 
 _TORQUE = pymunk.batch.BodyFields.TORQUE
 
@@ -174,8 +177,11 @@ class PlanarBiped(Body):
         self.contact = np.zeros(2)
         self._last_foot = -1
         self._voltage = np.zeros(4)
-        self._frames: list[np.ndarray] = [] if self.logging else None
-        self._trace: list[np.ndarray] = [] if self.logging else None
+        # a logged trial keeps, every `_log_every` ticks, the tick, its sensor values, the voltages
+        # and the links' x, y, angle (see log_trial); nothing else runs per tick
+        self._tick = 0
+        self._log: list[np.ndarray] | None = [] if self.logging else None
+        self._log_every = rates_of(self.telemetry).sample_every(p.control_dt) if self.logging else 0
         self.trial_id = request.trial_id
         self._update_contacts()
 
@@ -356,8 +362,9 @@ class PlanarBiped(Body):
         trunk_y, shank_l_y, shank_r_y = self._state[[0, 2, 4], 1].tolist()
         if trunk_y < shank_l_y or trunk_y < shank_r_y:
             self.fell = True  # trunk centre of mass below a shank's (§3.4.3)
-        if self._frames is not None:
-            self._record_frame(voltage)
+        if self._log is not None and self._tick % self._log_every == 0:
+            self._log.append(np.concatenate(((self._tick,), self.sense(), voltage, self._state[:, :3].ravel())))
+        self._tick += 1
 
     @property
     def done(self) -> bool:
@@ -382,64 +389,51 @@ class PlanarBiped(Body):
         return success, quality, metrics
 
     # ------------------------------------------------------------------ recording
-    def _record_frame(self, voltage: np.ndarray) -> None:
-        (tl, sl), (tr, sr) = self.legs
-        hip = self.trunk.local_to_world((0, -TRUNK_UP))
-        pts = [
-            self.trunk.position,
-            hip,
-            tl.local_to_world((0, -THIGH / 2)),
-            self._foot(0),
-            tr.local_to_world((0, -THIGH / 2)),
-            self._foot(1),
-        ]
-        self._frames.append(np.array([[q.x, q.y] for q in pts]))
-        self._trace.append(np.concatenate([self.sense(), voltage]))
-
     def log_trial(self, trial_id: int) -> None:
-        """Links as 2-D line strips and joint angles as scalars, on ``sim_time`` (trial k starts at k x duration)."""
-        import rerun as rr
-
-        if not self._frames:
+        """A logged trial as telemetry on ``sim_time`` (trial k starts at k x duration): joint angles
+        (deg), motor voltages (V) and foot contacts at ``rates.signals_hz``, the walker's links as
+        2-D line strips at ``rates.pictures_hz``, and the ground under its path."""
+        if not self._log:
             return
-        rec = self.recording
-        frames = np.stack(self._frames)
-        trace = np.stack(self._trace)
-        n = len(frames)
-        times = trial_id * self.params.duration + self.params.control_dt * np.arange(1, n + 1)
-        idx = [
-            rr.TimeColumn("sim_time", duration=times),
-            rr.TimeColumn("trial", sequence=np.full(n, trial_id)),
-        ]
-        for j, name in enumerate(s.name for s in SENSORS[:4]):
-            rec.send_columns(f"{self.entity}/joints/{name}", idx, rr.Scalars.columns(scalars=np.degrees(trace[:, j])))
-        for j, name in enumerate(s.name for s in COMMANDS):  # motor voltages (3.6): the motor neurons' net output
-            rec.send_columns(f"{self.entity}/motors/{name}", idx, rr.Scalars.columns(scalars=trace[:, 8 + j]))
-        rec.send_columns(f"{self.entity}/contacts/left", idx, rr.Scalars.columns(scalars=trace[:, 4]))
-        rec.send_columns(f"{self.entity}/contacts/right", idx, rr.Scalars.columns(scalars=trace[:, 5]))
-        every = max(1, int(round(0.04 / self.params.control_dt)))  # 25 pictures per simulated second
-        shown = np.arange(0, n, every)
-        m = len(shown)
-        # one row per picture, three strips per row: trunk, left leg, right leg (one call per trial)
-        strips = [f[idx] for f in frames[shown] for idx in _WALKER_STRIPS]
-        rec.send_columns(
-            f"{self.entity}/walker",
-            [rr.TimeColumn("sim_time", duration=times[shown]), rr.TimeColumn("trial", sequence=np.full(m, trial_id))],
-            rr.LineStrips2D.columns(
-                strips=strips, colors=np.tile(_WALKER_COLORS, (m, 1)), radii=np.full(3 * m, 0.006)
-            ).partition(np.full(m, 3)),
+        p, sink = self.params, self.telemetry
+        rates = rates_of(sink)
+        log = np.stack(self._log)
+        ticks = log[:, 0].astype(np.int64)
+        times = trial_id * p.duration + p.control_dt * (ticks + 1)  # the state after tick i
+        sensors, voltage, links = log[:, 1:9], log[:, 9:13], log[:, 13:].reshape(-1, 5, 3)
+        shown = ticks % rates.signal_every(p.control_dt) == 0
+        for j, signal in enumerate(SENSORS[:4]):
+            sink.emit(series(f"joints/{signal.name}", trial_id, times[shown], np.degrees(sensors[shown, j]), "deg"))
+        for j, signal in enumerate(COMMANDS):  # motor voltages (3.6): the motor neurons' net output
+            sink.emit(series(f"motors/{signal.name}", trial_id, times[shown], voltage[shown, j], "V"))
+        for j, side in ((4, "left"), (5, "right")):
+            sink.emit(series(f"contacts/{side}", trial_id, times[shown], sensors[shown, j]))
+        pictured = ticks % rates.picture_every(p.control_dt) == 0
+        points = _walker_points(links[pictured])
+        strips = points[:, _WALKER_STRIPS].reshape(-1, _WALKER_STRIPS.shape[1], 2)  # (pictures x 3, 3, 2)
+        sink.emit(
+            Strips2D("walker", trial_id, times[pictured], strips, len(_WALKER_STRIPS), _WALKER_COLORS, follow=True)
         )
-        x0 = float(frames[0, 1, 0]) - 0.5
-        x1 = float(frames[-1, 1, 0]) + 0.5
-        gx = np.linspace(x0, x1, 60)
-        rec.log(
-            f"{self.entity}/ground",
-            rr.LineStrips2D(
-                [np.column_stack([gx, np.interp(gx, self.ground_x, self.ground_y)])],
-                colors=(120, 100, 80),
-                radii=0.004,
-            ),
-        )
+        hip_x = points[:, 1, 0]
+        gx = np.linspace(float(hip_x.min()) - 0.5, float(hip_x.max()) + 0.5, 60)
+        ground = np.column_stack([gx, np.interp(gx, self.ground_x, self.ground_y)])
+        sink.emit(Strips2D("ground", trial_id, np.array([trial_id * p.duration]), [ground], 1, _GROUND_COLOR, 0.004))
 
     def close(self) -> None:
         self.space = None
+
+
+def _walker_points(links: np.ndarray) -> np.ndarray:
+    """(frames, 6, 2) points [trunk, hip, left knee, left foot, right knee, right foot] from the
+    links' (frames, 5, 3) x, y, angle [trunk, thigh_l, shank_l, thigh_r, shank_r]: a link's point
+    at (0, -d) in its own frame is at (x + d sin a, y - d cos a)."""
+
+    def below(link: int, d: float) -> np.ndarray:
+        x, y, a = links[:, link, 0], links[:, link, 1], links[:, link, 2]
+        return np.stack([x + d * np.sin(a), y - d * np.cos(a)], axis=1)
+
+    trunk = links[:, 0, :2]
+    return np.stack(
+        [trunk, below(0, TRUNK_UP), below(1, THIGH / 2), below(2, SHANK / 2), below(3, THIGH / 2), below(4, SHANK / 2)],
+        axis=1,
+    )

@@ -25,6 +25,7 @@ from sfl_brain.messages import (
     Learned,
 )
 from sfl_brain.module import Module, on
+from sfl_brain.telemetry import FAILURE, SUCCESS, MapSnapshots
 
 from .som import SelfOrganisingMap, SOMParams
 
@@ -52,7 +53,7 @@ class ACC(Module):
         self.failure_map = SelfOrganisingMap(p, dim, failure_rng)
         if p.restore:
             self.restore(p.restore)
-        self._snapshots: list[tuple[int, dict]] = []  # map states not yet sent to Rerun
+        self._snapshots: list[tuple[int, dict]] = []  # map states not yet emitted as telemetry
         self._flushed = time.monotonic()
 
     # --- evaluation and decision -------------------------------------------------
@@ -81,8 +82,8 @@ class ACC(Module):
     @on(Learn)
     def on_learn(self, msg: Learn) -> Learned:
         change = self.learn(np.asarray(msg.v, dtype=float), msg.success, msg.rho)
-        if self.recording is not None:
-            self.defer(self.log_maps)  # after the reply: logging is off the learning cycle's path
+        if self.telemetry is not None:
+            self.defer(self.log_maps)  # after the reply: showing the maps is off the learning cycle's path
         return Learned(
             change=change,
             n_success_samples=self.success_map.samples,
@@ -149,9 +150,10 @@ class ACC(Module):
         removed = self.prune_failure_map() if msg.prune else np.array([], dtype=int)
         if path is not None:
             self.checkpoint(path)
-        if self.recording is not None:
-            self.log_maps()
+        if self.telemetry is not None:
             self.flush_maps()
+            self.log_maps()
+            self.flush_maps(final=True)
         return Ack(detail=f"pruned {removed.size} failure neurons: {removed.tolist()}")
 
     def _checkpoint_path(self, path: str) -> Path:
@@ -174,53 +176,32 @@ class ACC(Module):
         return (("success", self.success_map), ("failure", self.failure_map))
 
     # --- observability ---------------------------------------------------------------------
-    #: map snapshots are sent to Rerun as columns, at most this many trials or seconds late
+    #: map snapshots are emitted in batches, at most this many trials or seconds late
     LOG_BATCH = 32
-    LOG_SECONDS = 0.5
+    LOG_SECONDS = 2.0
+    COLOURS = {"success": SUCCESS, "failure": FAILURE}
 
     def log_maps(self) -> None:
-        """Snapshot both maps (weights, active flags) at this trial; sent in batches (see flush_maps)."""
+        """Snapshot both maps (weights, active flags) after this trial; emitted in batches (see flush_maps)."""
         trial = self.success_map.samples + self.failure_map.samples
         self._snapshots.append((trial, {name: (m.weights.copy(), m.active.copy()) for name, m in self._maps()}))
         if len(self._snapshots) >= self.LOG_BATCH or time.monotonic() - self._flushed > self.LOG_SECONDS:
             self.flush_maps()
 
-    def flush_maps(self) -> None:
-        """Both maps' neurons and grid edges after every trial, on the ``trial`` timeline (one call per series)."""
-        import rerun as rr
-
+    def flush_maps(self, final: bool = False) -> None:
+        """Emit the buffered snapshots as :class:`~sfl_brain.telemetry.MapSnapshots`, one per map
+        (``success_map``, ``failure_map``): neurons, active flags and grid edges after each trial, on
+        the ``trial`` timeline (the number of trials learnt). ``final``: the maps as the run leaves them."""
         snapshots, self._snapshots = self._snapshots, []
         self._flushed = time.monotonic()
-        if not snapshots or self.recording is None:
+        if not snapshots or self.telemetry is None:
             return
-        index = [rr.TimeColumn("trial", sequence=np.array([t for t, _ in snapshots]))]
-        colours = {"success": (40, 170, 60), "failure": (210, 50, 50)}
+        trials = np.array([t for t, _ in snapshots])
         for name, m in self._maps():
-            weights = np.concatenate([snap[name][0] for _, snap in snapshots])[:, :3]
-            active = np.concatenate([snap[name][1] for _, snap in snapshots])
-            stack = np.stack([snap[name][0] for _, snap in snapshots])
-            segments = m.segments(stack).reshape(-1, 2, m.dim)[:, :, :3]
-            if weights.shape[1] == 1:  # a 1-D map is drawn on a line
-                weights = np.column_stack([weights, np.zeros(len(weights))])
-                segments = np.concatenate([segments, np.zeros_like(segments)], axis=2)
-            points, strips = (rr.Points3D, rr.LineStrips3D) if weights.shape[1] == 3 else (rr.Points2D, rr.LineStrips2D)
-            colour = np.where(active[:, None], colours[name], (150, 150, 150)).astype(np.uint8)
-            self.recording.send_columns(
-                f"{self.entity}/{name}_map/neurons",
-                index,
-                points.columns(
-                    positions=weights, colors=colour, radii=np.full(len(weights), 0.008, np.float32)
-                ).partition([m.size] * len(snapshots)),
-            )
-            n_seg = len(segments) // len(snapshots)
-            self.recording.send_columns(
-                f"{self.entity}/{name}_map/edges",
-                index,
-                strips.columns(
-                    strips=segments,
-                    colors=np.tile(np.array(colours[name], np.uint8), (len(segments), 1)),
-                    radii=np.full(len(segments), 0.002, np.float32),
-                ).partition([n_seg] * len(snapshots)),
+            weights = np.stack([snap[name][0] for _, snap in snapshots])
+            active = np.stack([snap[name][1] for _, snap in snapshots])
+            self.telemetry.emit(
+                MapSnapshots(f"{name}_map", trials, weights, active, m.segments(weights), self.COLOURS[name], final)
             )
 
     def close(self) -> None:

@@ -39,6 +39,7 @@ from .messages import (
 )
 from .module import Module, ModuleParams, on
 from .signals import Signal, WiringError, names, wiring
+from .telemetry import FAILURE, SUCCESS, Event, rates_of, series
 
 
 class ControllerLink(Protocol):
@@ -123,7 +124,37 @@ class Body(Module):
         raise NotImplementedError
 
     def log_trial(self, trial_id: int) -> None:
-        """Send what was buffered during the trial to ``self.recording`` (optional)."""
+        """Emit what was buffered during a logged trial to ``self.telemetry`` (optional).
+
+        Called at the end of a trial during which ``self.logging`` was True; times on ``sim_time``
+        (this trial starts at ``trial_id * duration``), sampled as ``self.telemetry.rates`` asks.
+        """
+
+    def log_outcome(self, trial_id: int, elapsed: float, success: bool, metrics: dict) -> None:
+        """Mark a logged trial's start and end on ``sim_time``, coloured by its outcome: an event
+        each (``trial/events``) and a marker at 1 (``trial/success``) or 0 (``trial/failure``)."""
+        t0 = trial_id * self.params.duration
+        verdict, colour = ("success", SUCCESS) if success else ("failure", FAILURE)
+        shown = ", ".join(
+            f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}"
+            for k, v in metrics.items()
+            if not isinstance(v, dict)
+        )
+        sink = self.telemetry
+        sink.emit(Event("trial/events", trial_id, t0, f"trial {trial_id} starts", color=colour))
+        sink.emit(
+            Event(
+                "trial/events",
+                trial_id,
+                t0 + elapsed,
+                f"trial {trial_id}: {verdict} after {elapsed:.2f} s" + (f" ({shown})" if shown else ""),
+                level="INFO" if success else "WARN",
+                color=colour,
+            )
+        )
+        sink.emit(
+            series(f"trial/{verdict}", trial_id, [t0, t0 + elapsed], [float(success)] * 2, color=colour, points=True)
+        )
 
     # --- the loop ------------------------------------------------------------
     def _check_sensors(self, values: Any, trial_id: int, tick: int) -> None:
@@ -151,7 +182,8 @@ class Body(Module):
     @on(TrialRequest)
     def trial(self, request: TrialRequest) -> TrialResult:
         """Run one trial in lockstep with the controller behind ``self.link``."""
-        self.logging = bool(request.log and self.recording is not None)
+        self.logging = bool(request.log and self.telemetry is not None)
+        tick = 0
         self.start_trial(request)
         if self.COMMANDS:
             if self.link is None:
@@ -168,7 +200,6 @@ class Body(Module):
                     dt=self.params.control_dt,
                 )
             )
-            tick = 0
             step_wall = time.perf_counter()
             dt = self.params.control_dt
             step = self.link.step
@@ -197,6 +228,7 @@ class Body(Module):
                         time.sleep(delay)
         success, quality, metrics = self.outcome()
         if self.logging:
+            self.log_outcome(request.trial_id, tick * self.params.control_dt, bool(success), metrics)
             self.log_trial(request.trial_id)
         return TrialResult(
             trial_id=request.trial_id,
@@ -224,8 +256,10 @@ class Controller(Module):
     WRITES: ClassVar[tuple[str, ...]] = ()
     #: learnt parameters a trial may set (checked by ``sfl check``)
     TRIAL_PARAMS: ClassVar[tuple[str, ...]] = ()
-    #: names of the neuron activities :meth:`neurons` returns (logged to Rerun on logged trials)
+    #: names of the neuron activities :meth:`neurons` returns (shown on logged trials, at
+    #: ``neurons/<name>``)
     NEURONS: ClassVar[tuple[str, ...]] = ()
+    #: a logged trial's neuron activities: (rows, ticks, trial_id, t0, dt, every); None when not logging
     _neuron_log = None
 
     def configure(self, params: dict, seed: int) -> None:
@@ -276,7 +310,10 @@ class Controller(Module):
             self._wired_for = layout
         self._trial_id = msg.trial_id
         self.flush_neurons()  # the previous logged trial, if any
-        self._neuron_log = ([], msg.trial_id, msg.t0, msg.dt) if msg.log and self.NEURONS and self.recording else None
+        self._neuron_log = None
+        rates = rates_of(self.telemetry)
+        if msg.log and self.NEURONS and self.telemetry is not None and rates.neurons:
+            self._neuron_log = ([], [], msg.trial_id, msg.t0, msg.dt, rates.signal_every(msg.dt))
         self.configure(dict(msg.params), msg.seed)
         return Ack()
 
@@ -284,8 +321,10 @@ class Controller(Module):
     def on_sensor_frame(self, frame: SensorFrame) -> MotorCommand:
         read = self._read_index
         values = self.step(frame.values if read is None else frame.values[read])
-        if self._neuron_log is not None:
-            self._neuron_log[0].append(self.neurons())
+        neuron_log = self._neuron_log
+        if neuron_log is not None and frame.tick % neuron_log[5] == 0:  # sampled as the sink asks
+            neuron_log[0].append(self.neurons())
+            neuron_log[1].append(frame.tick)
         if type(values) is not np.ndarray or values.dtype != _F8:
             # a step that returns a list or float32 still sends a float64 vector (the packed layout)
             values = np.asarray(values, dtype=_F8)
@@ -294,21 +333,17 @@ class Controller(Module):
         return MotorCommand(trial_id=frame.trial_id, tick=frame.tick, values=values)
 
     def flush_neurons(self) -> None:
-        """Send a logged trial's neuron activities as scalar columns on ``sim_time`` and ``trial``."""
+        """Emit a logged trial's neuron activities as :class:`~sfl_brain.telemetry.Scalars` at
+        ``neurons/<name>``: the activity after tick i's step at ``t0 + (i + 1) dt`` on ``sim_time``
+        (when the body's state after that tick is sampled too)."""
         log_, self._neuron_log = self._neuron_log, None
-        if not log_ or not log_[0]:
+        if not log_ or not log_[0] or self.telemetry is None:
             return
-        import rerun as rr
-
-        rows, trial_id, t0, dt = log_
+        rows, ticks, trial_id, t0, dt, _ = log_
         trace = np.stack(rows)
-        n = len(trace)
-        index = [
-            rr.TimeColumn("sim_time", duration=t0 + dt * np.arange(1, n + 1)),
-            rr.TimeColumn("trial", sequence=np.full(n, trial_id)),
-        ]
+        times = t0 + dt * (np.asarray(ticks) + 1)
         for j, name in enumerate(self.NEURONS):
-            self.recording.send_columns(f"{self.entity}/neurons/{name}", index, rr.Scalars.columns(scalars=trace[:, j]))
+            self.telemetry.emit(series(f"neurons/{name}", trial_id, times, trace[:, j]))
 
     def close(self) -> None:
         self.flush_neurons()

@@ -73,8 +73,9 @@ class Module:
 
     def __init__(self, params: ModuleParams | None = None, *, seed: int = 0) -> None:
         self.params = params if params is not None else self.Params()
-        #: a ``rerun.RecordingStream`` when hosted with a recording, else None
-        self.recording = None
+        #: where this module's telemetry goes (a :class:`~sfl_brain.telemetry.TelemetrySink`): the
+        #: runtime's Rerun sink when the run records, a test's capture, or None (nothing to show)
+        self.telemetry = None
         #: the entity path prefix this module logs under (its instance name)
         self.entity = type(self).__name__.lower()
         self._deferred: list[Callable[[], None]] = []

@@ -1,69 +1,171 @@
 """What the supervisor logs to Rerun: decisions, trials, vigilance, and the default layout.
 
-Entity paths (every process logs into the same recording id):
+Entity paths (every process logs into the same recording id; ``docs/recording.md`` shows the layout):
 
-* ``decisions/margin`` (d_f - d_s), ``decisions/d_success``, ``decisions/d_failure``, ``decisions/s_vig``,
-  ``decisions/go`` and ``decisions/v_unit/<axis>``, ``decisions/v/<axis>`` on the ``decision`` timeline;
-* ``trials/*`` (success rate, N_s, N_f, N_s/N_f, eta, rho, outcome, v per axis), ``vigilance/*`` (s_vig
-  and band) and
-  ``omega/trials`` (the tried point, green success / red failure) on the ``trial`` timeline;
-* ``acc/success_map``, ``acc/failure_map``: the maps (logged by the ACC process);
-* ``body/...``: the body's motion on ``sim_time`` (logged by the body workers);
-* ``controller/...``: neuron activities (logged by the controller).
+* ``decisions/d_success``, ``decisions/d_failure`` (3.1)-(3.2), ``decisions/margin`` (d_f - d_s),
+  ``decisions/s_vig``, ``decisions/go`` (1 go, 0 no-go: the early warning (3.3)) and
+  ``decisions/v_unit/<axis>``, ``decisions/v/<axis>``: one row per decision (per sample drawn), on
+  the ``decision`` timeline, on ``trial`` (the trial it was drawn for: a no-go's is the next trial)
+  and on ``sim_time`` (that trial's start);
+* ``trials/*`` (success, success rate, N_s, N_f, N_s/N_f, eta, rho, v per axis), ``trials/log`` (a
+  line per trial, green success / red failure), ``vigilance/*`` (s_vig and its band) and
+  ``omega/trials`` (the tried point, green success / red failure) on ``trial`` and ``sim_time``;
+* ``acc/success_map``, ``acc/failure_map``: the maps (the ACC process's telemetry);
+* ``body/...``: the body's motion, joint angles, motors, trial start/end markers on ``sim_time``
+  (the body workers' telemetry), ``controller/neurons/...``: neuron activities.
+
+On ``sim_time`` trial k starts at ``k * trial_seconds`` (the body's ``duration``), so scrubbing it
+shows a trial's walker beside the decision that chose it and the maps that decided.
 """
 
 from __future__ import annotations
 
 import logging
 import time
+from pathlib import Path
 
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from .telemetry import FAILURE, SUCCESS
+
 log = logging.getLogger("sfl.rrlog")
 
-SUCCESS = (40, 170, 60)
-FAILURE = (210, 50, 50)
+#: what the decisions panel shows, with the series' names and colours
+#: s a process waits for its recording to reach the disk when it closes (seconds on a healthy disk; a full disk
+#: stops rerun's writer thread and an unbounded flush would wait for ever)
+RERUN_FLUSH_TIMEOUT = 30.0
+
+DECISION_SERIES = {
+    "d_success": ("d_s", SUCCESS),
+    "d_failure": ("d_f", FAILURE),
+    "margin": ("d_f - d_s", (120, 120, 120)),
+    "s_vig": ("s_vig", (60, 110, 220)),
+    "go": ("go (1) / no-go (0)", (230, 150, 30)),
+}
 
 
-def blueprint() -> rrb.Blueprint:
-    return rrb.Blueprint(
+def blueprint(timeline: str = "trial") -> rrb.Blueprint:
+    """The default layout: the body on the left (a y-up 3-D view of the walker and its ground, joint
+    angles in degrees, motor voltages, neuron activities), the brain on the right (both maps with the
+    tried points, the ACC's decisions, the trials with start/end markers, the events). Every panel
+    has data on both the ``trial`` and the ``sim_time`` timelines; ``timeline`` is the one shown first."""
+    walker = rrb.Spatial3DView(  # seen from /body/follow, which moves with the walker: the camera follows it
+        name="walker (y up, sim_time)",
+        origin="/body/follow",
+        contents=["/body/**"],  # pictures only: series and logs have no 3-D form
+        line_grid=rrb.LineGrid3D(visible=True, spacing=0.1, plane=rr.components.Plane3D.XY),
+        eye_controls=rrb.EyeControls3D(
+            kind="Orbital", position=(0.0, 0.15, 0.65), look_target=(0.0, 0.15, 0.0), eye_up=(0.0, 1.0, 0.0)
+        ),
+    )
+    # on sim_time a body's series show the trial at the cursor (20 s around it), on trial the whole run
+    around = rrb.VisibleTimeRange(
+        "sim_time",
+        start=rrb.TimeRangeBoundary.cursor_relative(seconds=-10.0),
+        end=rrb.TimeRangeBoundary.cursor_relative(seconds=10.0),
+    )
+    body = rrb.Vertical(
+        walker,
+        rrb.TimeSeriesView(name="joint angles (deg)", contents=["/body/joints/**"], time_ranges=around),
+        rrb.TimeSeriesView(name="motor voltages (V)", contents=["/body/motors/**"], time_ranges=around),
+        rrb.TimeSeriesView(name="neuron activities", contents=["/controller/neurons/**"], time_ranges=around),
+        row_shares=[3, 2, 2, 2],
+    )
+
+    def unit_square() -> rrb.EyeControls3D:  # Omega's unit square, its second axis up
+        return rrb.EyeControls3D(
+            kind="Orbital", position=(0.5, 0.5, 1.3), look_target=(0.5, 0.5, 0.0), eye_up=(0.0, 1.0, 0.0)
+        )
+
+    so_far = [  # every tried point up to the time cursor, on either timeline
+        rrb.VisibleTimeRange(t, start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.cursor_relative())
+        for t in ("trial", "sim_time")
+    ]
+    brain = rrb.Vertical(
         rrb.Horizontal(
-            rrb.Vertical(
-                rrb.Spatial2DView(name="success and failure maps", origin="/", contents=["/acc/**", "/omega/**"]),
-                rrb.Spatial2DView(name="body", origin="/body"),
+            rrb.Spatial3DView(
+                name="success (green) and failure (red) maps",
+                origin="/",
+                contents=["/acc/**", "/omega/axes"],
+                eye_controls=unit_square(),
             ),
-            rrb.Vertical(
-                rrb.TimeSeriesView(name="trials", origin="/trials"),
-                rrb.TimeSeriesView(name="vigilance", origin="/vigilance"),
-                rrb.TimeSeriesView(name="decisions", origin="/decisions"),
-                rrb.TimeSeriesView(name="joints and neurons", contents=["/body/joints/**", "/controller/**"]),
+            rrb.Spatial3DView(
+                name="tried points so far",
+                origin="/",
+                contents=["/omega/**"],
+                eye_controls=unit_square(),
+                time_ranges=so_far,
             ),
         ),
+        rrb.TimeSeriesView(
+            name="ACC decisions: go iff d_f - d_s > s_vig",
+            contents=[f"/decisions/{k}" for k in DECISION_SERIES] + ["/vigilance/band_low", "/vigilance/band_high"],
+            overrides={  # one marker per decision: a trial's decisions stack on the trial and sim_time timelines
+                f"/decisions/{k}": rr.SeriesPoints(names=name, colors=[colour], marker_sizes=2.5)
+                for k, (name, colour) in DECISION_SERIES.items()
+            },
+        ),
+        rrb.TimeSeriesView(
+            name="trials: outcome, success rate; start/end markers",
+            contents=["/trials/success", "/trials/success_rate", "/body/trial/success", "/body/trial/failure"],
+            overrides={
+                "/trials/success": rr.SeriesPoints(names="success (1) / failure (0)", marker_sizes=2.5),
+                "/trials/success_rate": rr.SeriesLines(names="success rate", colors=[SUCCESS]),
+            },
+        ),
+        rrb.TextLogView(
+            name="events", contents=["/trials/log", "/body/trial/events", "/body/events/**", "/controller/events/**"]
+        ),
+        row_shares=[3, 2, 2, 2],
+    )
+    return rrb.Blueprint(
+        rrb.Horizontal(body, brain),
+        rrb.TimePanel(state="collapsed", timeline=timeline, play_state="following"),
         collapse_panels=True,
     )
 
 
 class RerunLog:
-    """The supervisor's own recording stream (same recording id as every module's)."""
+    """The supervisor's own recording stream (same recording id as every module's).
 
-    def __init__(self, run_id: str, rrd: str | None, viewer: str | None, axes: list[str]) -> None:
+    ``trial_seconds``: simulated seconds between trial starts (the body's ``duration``); by default
+    read from the run folder's ``scenario.yaml`` (``rrd`` lies in ``<run>/rerun/``). None: the
+    supervisor's rows stay off ``sim_time``.
+    """
+
+    def __init__(
+        self, run_id: str, rrd: str | None, viewer: str | None, axes: list[str], trial_seconds: float | None = None
+    ) -> None:
         from .host import attach_sinks
+        from .host import trial_seconds as trial_seconds_of
 
         self.rec = rr.RecordingStream("sfl-brain", recording_id=run_id)
         attach_sinks(self.rec, rrd, viewer)
-        self.rec.send_blueprint(blueprint())
+        # the default layout for this application, not forced on a viewer that has one of its own (a
+        # user's changes, a layout file opened with the recording)
+        self.rec.send_blueprint(blueprint(), make_active=False, make_default=True)
         self.axes = axes
+        if trial_seconds is None and rrd:
+            trial_seconds = trial_seconds_of(Path(rrd).parent.parent)
+        self.trial_seconds = trial_seconds
         self._decisions: list[dict] = []
         self._trials: list[dict] = []
+        self._next_trial = 0  # the trial the next no-go decision is drawn for
         self._flushed = time.monotonic()
+        self.live = bool(viewer)
         self.broken = False  # the sink failed: stop sending, say so once
         self.rec.log("omega", rr.TextDocument("Parameter space axes (unit square): " + ", ".join(axes)), static=True)
+        self.rec.log("omega", rr.ViewCoordinates.RIGHT_HAND_Y_UP, static=True)
+        ends = np.eye(3)[: min(len(axes), 3)] * 1.04  # each axis's name at its end of the unit square
+        if len(ends):
+            self.rec.log("omega/axes", rr.Points3D(ends, labels=list(axes[:3]), radii=0.004), static=True)
 
-    #: rows are buffered and sent as columns (one call per series) at most this often, and at close
-    FLUSH_ROWS = 64
-    FLUSH_SECONDS = 0.5
+    #: rows are buffered and sent as columns (one call per series) when this many wait, at least every
+    #: FLUSH_SECONDS while a viewer watches, and at close (a file gets fewer, larger chunks)
+    FLUSH_ROWS = 256
+    FLUSH_SECONDS = 2.0
 
     def decisions(self, rows: list[dict]) -> None:
         self._decisions.extend(rows)
@@ -77,7 +179,7 @@ class RerunLog:
         if (
             len(self._decisions) >= self.FLUSH_ROWS
             or len(self._trials) >= self.FLUSH_ROWS
-            or time.monotonic() - self._flushed > self.FLUSH_SECONDS
+            or (self.live and time.monotonic() - self._flushed > self.FLUSH_SECONDS)
         ):
             self.flush()
 
@@ -100,8 +202,24 @@ class RerunLog:
             log.warning("the Rerun recording stopped (%s); records.jsonl keeps every row", exc)
         self.broken = True
 
+    def _trial_index(self, trials: np.ndarray, decisions: np.ndarray | None = None) -> list:
+        """Time columns: ``trial`` (and ``decision``), and ``sim_time`` at each trial's start when known."""
+        index = [rr.TimeColumn("trial", sequence=trials)]
+        if decisions is not None:
+            index.append(rr.TimeColumn("decision", sequence=decisions))
+        if self.trial_seconds:
+            index.append(rr.TimeColumn("sim_time", duration=trials * self.trial_seconds))
+        return index
+
     def _send_decisions(self, rows: list[dict]) -> None:
-        index = [rr.TimeColumn("decision", sequence=np.array([r["decision"] for r in rows]))]
+        drawn_for = []  # a go decision starts its trial; a no-go was drawn for the next trial to start
+        for r in rows:
+            if r.get("trial") is not None:
+                drawn_for.append(int(r["trial"]))
+                self._next_trial = int(r["trial"]) + 1
+            else:
+                drawn_for.append(self._next_trial)
+        index = self._trial_index(np.array(drawn_for), np.array([r["decision"] for r in rows]))
         columns = {
             "decisions/margin": [r["d_failure"] - r["d_success"] for r in rows],
             "decisions/d_success": [r["d_success"] for r in rows],
@@ -117,7 +235,7 @@ class RerunLog:
             self.rec.send_columns(path, index, rr.Scalars.columns(scalars=np.array(values, dtype=float)))
 
     def _series(self, path: str, rows: list[dict], key: str) -> None:
-        """One scalar series on the trial (and decision) timelines, rows where ``key`` has a value."""
+        """One scalar series on the trial (and decision, sim_time) timelines, rows where ``key`` has a value."""
         kept = [r for r in rows if r.get(key) is not None]
         if not kept:
             return
@@ -125,12 +243,10 @@ class RerunLog:
             path, self._index(kept), rr.Scalars.columns(scalars=np.array([float(r[key]) for r in kept]))
         )
 
-    @staticmethod
-    def _index(rows: list[dict]) -> list:
-        index = [rr.TimeColumn("trial", sequence=np.array([int(r["trial"]) for r in rows]))]
-        if all(r.get("decision") is not None for r in rows):
-            index.append(rr.TimeColumn("decision", sequence=np.array([int(r["decision"]) for r in rows])))
-        return index
+    def _index(self, rows: list[dict]) -> list:
+        trials = np.array([int(r["trial"]) for r in rows])
+        with_decision = all(r.get("decision") is not None for r in rows)
+        return self._trial_index(trials, np.array([int(r["decision"]) for r in rows]) if with_decision else None)
 
     def _send_trials(self, rows: list[dict]) -> None:
         for path, key in (
@@ -152,8 +268,8 @@ class RerunLog:
             self.rec.send_columns(
                 "omega/trials",
                 self._index(placed),
-                rr.Points2D.columns(
-                    positions=np.array([r["v_unit"][:2] for r in placed], dtype=float),
+                rr.Points3D.columns(  # in the y-up space of the maps (z = 0 for two axes)
+                    positions=np.array([(list(r["v_unit"][:3]) + [0.0, 0.0])[:3] for r in placed], dtype=float),
                     colors=np.array([SUCCESS if r["success"] else FAILURE for r in placed], dtype=np.uint8),
                     radii=np.full(len(placed), 0.006, dtype=np.float32),
                 ),
@@ -167,14 +283,16 @@ class RerunLog:
                     + (f", eta {r['quality']:.4g}" if r.get("quality") is not None else "")
                     + (f", rho {r['rho']:.3g}" if r.get("rho") is not None else "")
                     for r in rows
-                ]
+                ],
+                level=["INFO" if r["success"] else "WARN" for r in rows],
+                color=np.array([SUCCESS if r["success"] else FAILURE for r in rows], dtype=np.uint8),
             ),
         )
 
     def close(self) -> None:
         self.flush()
         try:
-            self.rec.flush()
+            self.rec.flush(timeout_sec=RERUN_FLUSH_TIMEOUT)  # a full disk stops rerun's writer: never wait for it
         except RuntimeError as exc:
             self._broke(exc)
         self.rec.disconnect()

@@ -64,6 +64,9 @@ def default_run_dir(plan: Plan) -> Path:
     return Path("runs") / plan.scenario.name / f"{stamp}-s{plan.scenario.seed}-{uuid.uuid4().hex[:4]}"
 
 
+MERGE_TIMEOUT = 600.0  # s: far above a merge of the largest run measured (a 1000-trial run's parts, seconds)
+
+
 def merge_recordings(run_dir: Path) -> Path | None:
     """Merge the per-process .rrd parts (one recording id) into ``recording.rrd``."""
     parts = sorted((run_dir / "rerun").glob("*.rrd"))
@@ -72,11 +75,17 @@ def merge_recordings(run_dir: Path) -> Path | None:
     target = run_dir / "recording.rrd"
     rerun_cli = shutil.which("rerun")
     command = [rerun_cli] if rerun_cli else [sys.executable, "-m", "rerun"]
-    done = subprocess.run(
-        [*command, "rrd", "merge", "--continue-on-error", "-o", str(target), *map(str, parts)],
-        capture_output=True,
-        text=True,
-    )
+    try:
+        done = subprocess.run(
+            [*command, "rrd", "merge", "--continue-on-error", "-o", str(target), *map(str, parts)],
+            capture_output=True,
+            text=True,
+            timeout=MERGE_TIMEOUT,
+        )
+    except subprocess.TimeoutExpired:
+        kept = run_dir / "rerun"
+        print(f"sfl: merging the Rerun parts took over {MERGE_TIMEOUT:.0f} s; kept in {kept}", file=sys.stderr)
+        return None
     if done.returncode != 0 or not target.exists():
         print(
             f"sfl: could not merge Rerun parts (kept in {run_dir / 'rerun'}): {done.stderr.strip()[-400:]}",

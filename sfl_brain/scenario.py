@@ -116,8 +116,22 @@ Protocol = Annotated[LearnProtocol | SweepProtocol | ExploitProtocol, Field(disc
 
 
 class Record(Strict):
+    """What a run keeps beyond its trial records, and how much of a logged trial the recording shows
+    (the rates reach every module process; see sfl_brain.telemetry.Rates and docs/recording.md)."""
+
     body_every: int = Field(1, ge=0, description="log the body's motion on every k-th trial (0: never)")
     decisions: bool = True
+    signals_hz: float = Field(
+        25.0,
+        ge=0,
+        le=10_000,
+        description="samples per simulated second of a logged trial's joint angles, motor commands, contacts "
+        "and neuron activities (0: every control tick)",
+    )
+    pictures_hz: float = Field(
+        25.0, ge=0, le=10_000, description="pictures of the body per simulated second of a logged trial (0: every tick)"
+    )
+    neurons: bool = Field(True, description="show the controller's neuron activities on logged trials")
 
 
 class Timeouts(Strict):

@@ -1,4 +1,4 @@
-"""Typed tables of a run: ``trials.parquet`` and ``decisions.parquet`` beside ``records.jsonl``.
+"""Typed tables of a run: ``trials.parquet``, ``decisions.parquet`` and ``maps.parquet`` beside ``records.jsonl``.
 
 ``records.jsonl`` is the append-only log a killed run keeps; it mixes decision and trial rows, so a
 data user who loads it in pandas gets one sparse table with booleans as floats. At the end of a run
@@ -9,17 +9,27 @@ column from :data:`DECISION_COLUMNS` and :data:`TRIAL_COLUMNS` (a test keeps the
 
 Columns that depend on the scenario: one per axis of Omega (``<axis name>``, the physical value,
 with the axis's ``unit``) and one per body metric (``m_<metric>``: bool, int64 or float64 by its values).
+
+``maps.parquet`` holds the ACC's success and failure maps after every trial (:data:`MAP_COLUMNS`, one
+row per neuron per map per snapshot). The ACC emits them as telemetry
+(:class:`~sfl_brain.telemetry.MapSnapshots`); in each module process a :class:`MapTable` writes them to
+``maps/<process>.parquet`` as they come, and :func:`write_tables` joins the parts at the end of the run.
 """
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
 from .records import read_records
+from .telemetry import MapSnapshots
+
+log = logging.getLogger("sfl.tables")
 
 
 @dataclass(frozen=True)
@@ -62,6 +72,19 @@ TRIAL_COLUMNS: tuple[Column, ...] = (
 )
 
 
+MAP_COLUMNS: tuple[Column, ...] = (
+    Column("module", pa.string(), "", "the module that holds the maps (its name in the scenario, e.g. `acc`)"),
+    Column("trial", _i8, "", "trials learnt when the snapshot was taken: the maps that chose trial `trial`"),
+    Column("map", pa.string(), "", "`success` (S_m) or `failure` (F_m)"),
+    Column(
+        "final", _b, "", "the maps as the run leaves them, after pruning (thesis §4.4.3), at the last trial's index"
+    ),
+    Column("neuron", _i8, "", "index of the neuron, row-major over the map's grid (`shape`)"),
+    Column("weights", pa.list_(_f8), "unit space", "the neuron's weight vector, one coordinate in [0, 1] per axis"),
+    Column("active", _b, "", "False for a failure neuron switched off by pruning"),
+)
+
+
 def _field(col: Column) -> pa.Field:
     return pa.field(col.name, col.type, nullable=True, metadata={"unit": col.unit, "meaning": col.meaning})
 
@@ -98,7 +121,8 @@ def _table(rows: list[dict], schema: pa.Schema) -> pa.Table:
 
 
 def write_tables(run_dir: Path, axes: list[dict]) -> list[Path]:
-    """Write ``decisions.parquet`` and ``trials.parquet`` from the run's records; returns the paths.
+    """Write ``decisions.parquet`` and ``trials.parquet`` from the run's records, and ``maps.parquet``
+    from the module processes' parts; returns the paths.
 
     ``axes``: the scenario's ``space`` entries (name, target, unit). A kind with no row gets no file.
     """
@@ -113,13 +137,89 @@ def write_tables(run_dir: Path, axes: list[dict]) -> list[Path]:
         path = run_dir / f"{kind}s.parquet"
         pq.write_table(_table(of_kind, schema), path)
         written.append(path)
+    maps = join_map_parts(run_dir)
+    if maps is not None:
+        written.append(maps)
     return written
 
 
+MAP_SCHEMA = pa.schema([_field(c) for c in MAP_COLUMNS])
+
+
+def map_rows(item: MapSnapshots, module: str) -> pa.Table:
+    """The rows of one :class:`~sfl_brain.telemetry.MapSnapshots` item: one per neuron per snapshot."""
+    k, size, _ = item.weights.shape
+    name = item.path.removesuffix("_map")
+    columns = {
+        "module": pa.array([module] * (k * size), pa.string()),
+        "trial": pa.array(np.repeat(np.asarray(item.trials, dtype=np.int64), size)),
+        "map": pa.array([name] * (k * size), pa.string()),
+        "final": pa.array(np.full(k * size, bool(item.final))),
+        "neuron": pa.array(np.tile(np.arange(size, dtype=np.int64), k)),
+        "weights": pa.FixedSizeListArray.from_arrays(
+            pa.array(np.asarray(item.weights, dtype=np.float64).reshape(-1)), item.weights.shape[2]
+        ).cast(pa.list_(_f8)),
+        "active": pa.array(np.asarray(item.active, dtype=bool).reshape(-1)),
+    }
+    return pa.table(columns, schema=MAP_SCHEMA)
+
+
+class MapTable:
+    """A telemetry sink that writes the map snapshots it is given to a Parquet file, as they come
+    (one row group per batch); other telemetry is not its business. The file is created with the
+    first snapshot; :meth:`close` finishes it."""
+
+    def __init__(self, path: Path, module: str) -> None:
+        self.path = Path(path)
+        self.module = module
+        self._writer: pq.ParquetWriter | None = None
+
+    def emit(self, item) -> None:
+        if not isinstance(item, MapSnapshots):
+            return
+        if self._writer is None:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._writer = pq.ParquetWriter(self.path, MAP_SCHEMA)
+        self._writer.write_table(map_rows(item, self.module))
+
+    def close(self) -> None:
+        if self._writer is not None:
+            self._writer.close()
+            self._writer = None
+
+
+def join_map_parts(run_dir: Path) -> Path | None:
+    """Join ``maps/*.parquet`` (one per module process that kept maps) into ``maps.parquet``; the
+    parts are removed once joined. A part that cannot be read (its process was killed before it
+    closed the file) is left where it is and named in the log. None when there is no part."""
+    parts_dir = Path(run_dir) / "maps"
+    parts = sorted(parts_dir.glob("*.parquet")) if parts_dir.is_dir() else []
+    tables, joined = [], []
+    for part in parts:
+        try:
+            tables.append(pq.read_table(part, schema=MAP_SCHEMA))
+            joined.append(part)
+        except (OSError, pa.ArrowException) as exc:
+            log.warning("map snapshots in %s could not be read (%s); left there", part, exc)
+    if not tables:
+        return None
+    path = Path(run_dir) / "maps.parquet"
+    pq.write_table(pa.concat_tables(tables), path)
+    for part in joined:
+        part.unlink()
+    if not any(parts_dir.iterdir()):
+        parts_dir.rmdir()
+    return path
+
+
 def columns_markdown() -> str:
-    """The fixed columns of both tables as Markdown (the body of ``docs/records.md``'s tables)."""
+    """The fixed columns of the tables as Markdown (the body of ``docs/records.md``'s tables)."""
     out = []
-    for title, cols in (("decisions.parquet", DECISION_COLUMNS), ("trials.parquet", TRIAL_COLUMNS)):
+    for title, cols in (
+        ("decisions.parquet", DECISION_COLUMNS),
+        ("trials.parquet", TRIAL_COLUMNS),
+        ("maps.parquet", MAP_COLUMNS),
+    ):
         out += [f"### `{title}`", "", "| column | type | unit | meaning |", "|---|---|---|---|"]
         out += [f"| `{c.name}` | {c.type} | {c.unit} | {c.meaning} |" for c in cols]
         out.append("")

@@ -6,11 +6,15 @@ from __future__ import annotations
 import json
 import shutil
 
+import numpy as np
 import pandas as pd
 import pyarrow.parquet as pq
 
+from sfl_brain.messages import Learn
+from sfl_brain.modules.acc import ACC
 from sfl_brain.records import read_records
-from sfl_brain.tables import DECISION_COLUMNS, TRIAL_COLUMNS, columns_markdown
+from sfl_brain.tables import DECISION_COLUMNS, MAP_COLUMNS, TRIAL_COLUMNS, MapTable, columns_markdown, join_map_parts
+from sfl_brain.telemetry import CaptureTelemetry, TelemetryTee
 
 from .conftest import ROOT, sfl
 
@@ -44,12 +48,44 @@ def test_tables_are_typed_and_hold_every_row(tmp_path):
     assert schema.field("x").metadata[b"meaning"] == b"body.x: physical value"
     first = next(r for r in rows if r["kind"] == "trial")
     assert trials.iloc[0]["quality"] == first["quality"] and list(trials.iloc[0]["v_unit"]) == first["v_unit"]
+    # the ACC's maps after every trial, and as the run left them (== acc.npz, which it checkpointed)
+    maps = pd.read_parquet(out / "maps.parquet")
+    assert maps["active"].dtype == bool and maps["final"].dtype == bool and maps["trial"].dtype == "int64"
+    assert sorted(maps.loc[~maps["final"], "trial"].unique()) == list(range(1, 21))
+    assert len(maps) == (20 + 1) * 2 * 100  # 20 snapshots and the final one, two 10 x 10 maps
+    saved = np.load(out / "acc.npz")
+    for name in ("success", "failure"):
+        final = maps[maps["final"] & (maps["map"] == name)].sort_values("neuron")
+        assert np.array_equal(np.stack(final["weights"]), saved[f"{name}_weights"])
+        assert final["active"].tolist() == saved[f"{name}_active"].tolist()
+    assert pq.read_schema(out / "maps.parquet").field("weights").metadata[b"unit"] == b"unit space"
+
+
+def test_map_table_writes_snapshots_as_they_come_and_joins_the_parts(tmp_path):
+    acc = ACC(ACC.Params(shape=(2, 3), dim=2), seed=0)
+    acc.entity = "acc"
+    table = MapTable(tmp_path / "maps" / "acc.parquet", module="acc")
+    acc.telemetry = TelemetryTee(CaptureTelemetry(), table)
+    rng = np.random.default_rng(1)
+    for _ in range(3):
+        acc.handle(Learn(v=rng.random(2), success=True, rho=1.0))
+        acc.run_deferred()  # the host snapshots the maps after it has replied
+        acc.flush_maps()  # one row group per flush
+    acc.telemetry.close()
+    assert pq.ParquetFile(tmp_path / "maps" / "acc.parquet").num_row_groups == 6  # 3 flushes x 2 maps
+    (tmp_path / "maps" / "killed.parquet").write_bytes(b"PAR1 not finished")  # a process killed mid-write
+    assert join_map_parts(tmp_path) == tmp_path / "maps.parquet"
+    assert [p.name for p in (tmp_path / "maps").iterdir()] == ["killed.parquet"]  # left for a person to look at
+    maps = pd.read_parquet(tmp_path / "maps.parquet")
+    assert maps["trial"].tolist()[:6] == [1] * 6 and set(maps["map"]) == {"success", "failure"}
+    last = maps[(maps["trial"] == 3) & (maps["map"] == "success")].sort_values("neuron")
+    assert np.array_equal(np.stack(last["weights"]), acc.success_map.weights) and last["active"].all()
 
 
 def test_records_doc_lists_every_fixed_column():
     text = (ROOT / "docs" / "records.md").read_text()
     assert columns_markdown() in text
-    for col in (*DECISION_COLUMNS, *TRIAL_COLUMNS):
+    for col in (*DECISION_COLUMNS, *TRIAL_COLUMNS, *MAP_COLUMNS):
         assert f"| `{col.name}` |" in text
 
 
