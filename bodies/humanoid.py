@@ -1,0 +1,666 @@
+"""A NAO-sized humanoid in PyBullet (thesis chapters 4-5; issue 16), built from boxes.
+
+The body is the NAO V4.0 of ``humanoid_table.py`` (one table of numbers: kinematics, masses, joint
+limits, efforts, speeds, motors; sources there and in CPG-HUMANOID.md §6): a torso with the head,
+two arms on their shoulder pitch, and two legs with hip roll, hip pitch, knee, ankle pitch and
+ankle roll (HipYawPitch fixed at 0), the twelve joints of the thesis's CPG (L1339). The URDF is
+generated from the table into a cache file; every NAO link is a solid box at its centre of mass.
+
+**Joints.** Angles and commands are NAO's (rad, Aldebaran signs; 0 = legs straight, arms forward):
+pitch joints turn about +y (hip pitch and ankle pitch +: extension, knee +: flexion, shoulder +:
+arm down), roll joints about +x (+: the left leg out, the right leg in). Each joint is a position
+servo, like NAO's motor boards: every physics step its speed target is ``servo_rate * (q_cmd - q)``,
+clipped to the joint's published speed, reached with a torque of at most ``servo_stiffness * |q_cmd - q|``
+(a P controller's; chosen here so that two feet on the ground cannot make the servos fight at full
+effort), never more than the published effort (§6). The motor torques are read back every physics
+step for the energy model.
+
+**Sensors.** Joint angles, velocities and motor torques; four pressure sensors (FSR) per foot at
+NAO's places (§6: toe/heel x = +0.070/-0.030 m, inner/outer y = 0.023/0.030 m), each contact force on
+the sole shared among them bilinearly, so the four add up to the foot's normal force; ``heel_*`` and
+``toe_*`` are the sums of the heel and toe pairs, the inputs of GB and GF (L1345); the torso's pitch
+and roll from an IMU model (NAO's inertial board reports the fused attitude: here the exact one,
+noise-free) and its body-frame rates. ``torso_pitch`` is the torso's angle to the vertical in its
+sagittal plane, + = leaning forward, the input of FB/FF (L1347); ``torso_roll`` + = leaning right
+(about +x). Every value saturates at its declared bounds.
+
+**Energy and efficiency** (5.4)-(5.8): P = sum_i c_i tau_i^2 with c_i = omega_0 / (tau_stall N_i^2)
+(§6, eta_g = 1), E_e = integral of P dt from the start to the finish line, E_k = m v_a^2 / 2 with
+v_a = 1.5 m / that time, eta = E_k / E_e for a success, 0 for a failure.
+
+**Trial.** The torso starts at x = 0, standing (``STANDING``, its ankles pitched by the slope so the
+soles lie on the ground, the torso upright). Success: the torso's centre of mass crosses
+``finish_line`` (1.5 m, L1650). Failure: a fall (the torso's centre of mass below
+``fall_height_fraction`` of its starting height above the ground, or |pitch| or |roll| over
+``fall_angle_deg``), leaving the lane (|y| > ``lane_half_width``) or the time-out (``duration``).
+
+**Conditions** (trial parameters): ``slope_deg`` (a constant ramp, uphill +, within +-15 deg),
+``terrain`` (pieces ``length:slope_deg`` from x = 0, e.g. ``"1.0:0,3.0:10"`` for flat then uphill), and a
+push on the torso: ``push_force`` N for ``push_duration`` s from ``push_time`` s, horizontal, toward
+``push_direction_deg`` (0 = forward, from behind; 90 = toward +y). E4.7's ball (L1430) is its push:
+34 N for 0.1 s from behind at t = 9 s.
+
+**Speed.** One PyBullet client per body (DIRECT, no GUI). A world is built once per terrain and saved;
+the next trial on that terrain restores it (``restoreState``), which gives the same trial bit for bit
+as a fresh build (tests/test_humanoid.py). Solver settings: docs/bodies/humanoid.md.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import tempfile
+
+import numpy as np
+from pydantic import Field
+
+from sfl_brain.bodies.humanoid_table import (
+    FSR_X,
+    FSR_Y,
+    JOINTS,
+    LINKS,
+    PARTS,
+    SOLE,
+    STANDING,
+    TOTAL_MASS,
+    motor_coefficient,
+)
+from sfl_brain.bodies.planar_biped import TERRAIN_SYNTAX, parse_terrain
+from sfl_brain.body import Body, BodyParams
+from sfl_brain.messages import TrialRequest
+from sfl_brain.signals import Signal
+from sfl_brain.telemetry import Arrows2D, Boxes3D, Event, rates_of, series
+
+
+def _import_pybullet_quietly():
+    """pybullet prints its build time on standard output when first imported (from C, so
+    ``sys.stdout`` cannot catch it); it would land in ``sfl list`` and ``sfl check`` output."""
+    import sys
+
+    if "pybullet" in sys.modules:
+        return sys.modules["pybullet"]
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 1)
+            import pybullet
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+    return pybullet
+
+
+pb = _import_pybullet_quietly()
+
+G = 9.81  # m/s^2
+MAX_SLOPE_DEG = 15.0  # the steepest ramp a trial may ask for (issue 16; the thesis's are 10 and 11 deg)
+MAX_PUSH = 200.0  # N: the hardest push a trial may ask for (chosen here: ~4 body weights)
+MAX_JOINT_SPEED = 25.0  # rad/s: velocity sensor range (chosen here: 3 x the fastest no-load joint speed, 8.3)
+MAX_FSR = 100.0  # N per pressure sensor (chosen here: 2 body weights; reached only in impacts)
+MAX_GYRO = 20.0  # rad/s: gyro range (chosen here)
+RUN_UP = 1.0  # m of ground behind the start, along the first piece
+RUN_OUT = 20.0  # m of ground after the last piece
+GROUND_WIDTH = 2.0  # m: wider than the lane (+-0.5 m)
+GROUND_THICKNESS = 0.2  # m
+CLEARANCE = 0.0005  # m between the soles and the ground at the start
+HOLD_TORQUE = 0.05  # N m: what a servo resists with at zero error (chosen here: about NAO's joint friction)
+
+JOINT_NAMES = tuple(j.name for j in JOINTS)
+LOWER = np.array([j.lower for j in JOINTS])
+UPPER = np.array([j.upper for j in JOINTS])
+EFFORT = np.array([j.effort for j in JOINTS])
+SPEED = np.array([j.velocity for j in JOINTS])
+MOTOR = np.array([motor_coefficient(j) for j in JOINTS])  # c_i of P = c_i tau_i^2, W / (N m)^2
+FEET = ("foot_l", "foot_r")
+FSR_NAMES = tuple(f"fsr_{side}_{end}_{edge}" for side in "lr" for end in ("toe", "heel") for edge in ("inner", "outer"))
+
+SENSORS = (
+    *(Signal(j.name, "rad", j.lower, j.upper, f"{j.nao} angle, + = {j.plus}") for j in JOINTS),
+    *(
+        Signal(f"{j.name}_velocity", "rad/s", -MAX_JOINT_SPEED, MAX_JOINT_SPEED, f"{j.nao} angular velocity")
+        for j in JOINTS
+    ),
+    *(
+        Signal(f"{j.name}_torque", "N m", -j.effort, j.effort, f"{j.nao} motor torque (last physics step)")
+        for j in JOINTS
+    ),
+    Signal("heel_l", "N", 0.0, 2 * MAX_FSR, "left heel: sum of its two pressure sensors (GB's input, L1345)"),
+    Signal("toe_l", "N", 0.0, 2 * MAX_FSR, "left toe: sum of its two pressure sensors (GF's input)"),
+    Signal("heel_r", "N", 0.0, 2 * MAX_FSR, "right heel pressure sensors, summed"),
+    Signal("toe_r", "N", 0.0, 2 * MAX_FSR, "right toe pressure sensors, summed"),
+    *(Signal(name, "N", 0.0, MAX_FSR, "one foot pressure sensor (FSR), normal force") for name in FSR_NAMES),
+    Signal("torso_pitch", "rad", -math.pi, math.pi, "torso angle to the vertical, + = leaning forward (L1347)"),
+    Signal("torso_roll", "rad", -math.pi, math.pi, "torso angle to the vertical, + = leaning right (about +x)"),
+    Signal("torso_pitch_rate", "rad/s", -MAX_GYRO, MAX_GYRO, "gyro: torso rate about its own y axis"),
+    Signal("torso_roll_rate", "rad/s", -MAX_GYRO, MAX_GYRO, "gyro: torso rate about its own x axis"),
+)
+COMMANDS = tuple(
+    Signal(f"q_{j.name}", "rad", j.lower, j.upper, f"{j.nao} position target, clipped to its limits") for j in JOINTS
+)
+SENSOR_LOW = np.array([s.low for s in SENSORS])
+SENSOR_HIGH = np.array([s.high for s in SENSORS])
+N = len(JOINTS)
+
+
+# ---------------------------------------------------------------------------------------------------- model
+def _box_inertia(mass: float, size) -> np.ndarray:
+    x, y, z = size
+    return np.diag([y * y + z * z, x * x + z * z, x * x + y * y]) * mass / 12
+
+
+def link_inertial(link: str) -> tuple[float, np.ndarray, np.ndarray]:
+    """(mass kg, centre of mass m, inertia tensor about it kg m^2) of a simulated link: its parts' boxes,
+    moved to the common centre of mass (parallel axes)."""
+    parts = [p for p in PARTS if p.link == link]
+    mass = sum(p.mass for p in parts)
+    com = sum(p.mass * np.array(p.com) for p in parts) / mass
+    inertia = np.zeros((3, 3))
+    for p in parts:
+        d = np.array(p.com) - com
+        inertia += _box_inertia(p.mass, p.size) + p.mass * (d @ d * np.eye(3) - np.outer(d, d))
+    return mass, com, inertia
+
+
+def urdf_text() -> str:
+    """The humanoid's URDF, generated from the table (collision boxes only: DIRECT mode draws nothing)."""
+    xyz = " ".join  # a URDF triple
+    out = ['<?xml version="1.0"?>', '<robot name="nao_v40_boxes">']
+    for link in LINKS:
+        mass, com, i = link_inertial(link)
+        out.append(f'  <link name="{link}">')
+        out.append(
+            f'    <inertial><origin xyz="{xyz(map(repr, com.tolist()))}"/><mass value="{mass!r}"/>'
+            f'<inertia ixx="{i[0, 0]!r}" ixy="{i[0, 1]!r}" ixz="{i[0, 2]!r}" iyy="{i[1, 1]!r}" iyz="{i[1, 2]!r}" '
+            f'izz="{i[2, 2]!r}"/></inertial>'
+        )
+        for p in PARTS:
+            if p.link == link and p.collides:
+                out.append(
+                    f'    <collision name="{p.name}"><origin xyz="{xyz(map(repr, p.com))}"/>'
+                    f'<geometry><box size="{xyz(map(repr, p.size))}"/></geometry></collision>'
+                )
+        out.append("  </link>")
+    for j in JOINTS:
+        out.append(
+            f'  <joint name="{j.name}" type="revolute"><parent link="{j.parent}"/><child link="{j.child}"/>'
+            f'<origin xyz="{xyz(map(repr, j.origin))}"/><axis xyz="{xyz(map(repr, j.axis))}"/>'
+            f'<limit lower="{j.lower!r}" upper="{j.upper!r}" effort="{j.effort!r}" velocity="{j.velocity!r}"/></joint>'
+        )
+    out.append("</robot>")
+    return "\n".join(out) + "\n"
+
+
+def urdf_path() -> str:
+    """The generated URDF in the temp directory, named by its content's hash (written once, atomically)."""
+    text = urdf_text()
+    path = os.path.join(tempfile.gettempdir(), f"sfl_humanoid_{hashlib.sha1(text.encode()).hexdigest()[:12]}.urdf")
+    if not os.path.exists(path):
+        fd, tmp = tempfile.mkstemp(suffix=".urdf", dir=os.path.dirname(path))
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    return path
+
+
+def _rotate(quaternions: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    """Vectors (n, 3) turned by unit quaternions (n, 4) in PyBullet's (x, y, z, w) order."""
+    u, w = quaternions[:, :3], quaternions[:, 3:]
+    t = 2 * np.cross(u, vectors)
+    return vectors + w * t + np.cross(u, t)
+
+
+# ---------------------------------------------------------------------------------------------------- checks
+def _slope(value, where: str = "") -> float:
+    where = f"{where}: " if where else ""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ValueError(f"{where}expected a number of degrees; got {value!r}")
+    if abs(value) > MAX_SLOPE_DEG:
+        raise ValueError(f"{where}expected a slope within +-{MAX_SLOPE_DEG:g} deg; got {value!r}")
+    return float(value)
+
+
+def _number(name: str, value, low: float, high: float) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not low <= value <= high:
+        raise ValueError(f"expected {name} in [{low:g}, {high:g}]; got {value!r}")
+    return float(value)
+
+
+PUSH_RANGES = {
+    "push_force": (0.0, MAX_PUSH),  # N
+    "push_time": (0.0, 600.0),  # s
+    "push_duration": (0.0, 10.0),  # s
+    "push_direction_deg": (-180.0, 180.0),  # deg, 0 = forward
+}
+
+
+class HumanoidParams(BodyParams):
+    duration: float = Field(60.0, gt=0, le=600, description="trial time-out, s of simulated time (digest §7.14)")
+    substeps: int = Field(4, ge=1, le=40, description="physics steps per control tick (4: 400 Hz at 10 ms)")
+    solver_iterations: int = Field(10, ge=1, le=200, description="PyBullet constraint solver iterations")
+    friction: float = Field(0.8, gt=0, le=2, description="sole-ground friction coefficient")
+    servo_rate: float = Field(20.0, gt=0, le=1000, description="1/s: joint speed target per rad of position error")
+    servo_stiffness: float = Field(100.0, gt=0, description="N m/rad: a servo's torque is at most this x its error")
+    slope_deg: float = Field(0.0, ge=-MAX_SLOPE_DEG, le=MAX_SLOPE_DEG, description="deg: ramp if a trial sets none")
+    finish_line: float = Field(1.5, gt=0, description="m: the torso crossing x = this is a success (L1650)")
+    lane_half_width: float = Field(0.5, gt=0, description="m: |y| of the torso beyond this is a failure")
+    fall_height_fraction: float = Field(0.5, gt=0, lt=1, description="fall: torso CoM below this x its start height")
+    fall_angle_deg: float = Field(45.0, gt=0, le=180, description="fall: |torso pitch| or |roll| over this, deg")
+    start_noise: float = Field(0.0, ge=0, le=0.2, description="rad: s.d. of the start's joint offsets (trial seed)")
+
+
+class Humanoid(Body):
+    """NAO V4.0-sized humanoid (PyBullet, boxes): 12 position servos, foot pressure, IMU, motor energy."""
+
+    Params = HumanoidParams
+    SENSORS = SENSORS
+    COMMANDS = COMMANDS
+    TRIAL_PARAMS = ("slope_deg", "terrain", *PUSH_RANGES)
+
+    def __init__(self, params: HumanoidParams | None = None, *, seed: int = 0) -> None:
+        super().__init__(params, seed=seed)
+        self.client: int | None = None  # PyBullet's, made by the first trial
+        self._world_key = None  # the terrain of the world built and saved
+        self._saved: int | None = None
+
+    # ------------------------------------------------------------------ conditions
+    @classmethod
+    def check_trial_param(cls, name: str, value) -> None:
+        """Raise ValueError if ``value`` cannot be trial parameter ``name`` (``sfl check`` calls this)."""
+        if name == "slope_deg":
+            _slope(value)
+        elif name == "terrain":
+            for k, (_, slope) in enumerate(parse_terrain(value)):
+                _slope(slope, f"piece {k} of terrain {value!r}")
+        elif name in PUSH_RANGES:
+            _number(name, value, *PUSH_RANGES[name])
+
+    def _pieces(self, body_params: dict) -> tuple[tuple[float, float], ...]:
+        """(length m, slope rad) pieces of the ground from x = 0."""
+        profile = body_params.get("terrain")
+        if profile:
+            pieces = parse_terrain(profile)
+            for k, (_, slope) in enumerate(pieces):
+                _slope(slope, f"piece {k} of terrain {profile!r} ({TERRAIN_SYNTAX})")
+            return tuple((length, math.radians(slope)) for length, slope in pieces)
+        return ((1.0, math.radians(_slope(body_params.get("slope_deg", self.params.slope_deg), "slope_deg"))),)
+
+    # ------------------------------------------------------------------ world
+    def start_trial(self, request: TrialRequest) -> None:
+        p = self.params
+        body_params = request.body_params
+        for name in PUSH_RANGES:
+            if name in body_params:
+                self.check_trial_param(name, body_params[name])
+        self.push_force = float(body_params.get("push_force", 0.0))
+        self.push_start = float(body_params.get("push_time", 0.0))
+        self.push_end = self.push_start + float(body_params.get("push_duration", 0.0))
+        direction = math.radians(float(body_params.get("push_direction_deg", 0.0)))
+        self.push_vector = self.push_force * np.array([math.cos(direction), math.sin(direction), 0.0])
+        pieces = self._pieces(body_params)
+        if self.client is None:
+            self.client = pb.connect(pb.DIRECT)
+        if pieces != self._world_key:
+            self._build(pieces)
+        else:
+            # the contact cache is not part of a saved state: lift the robot clear and let collision detection
+            # drop its contact points, so that no trial inherits the last one's (then restore the start)
+            pb.resetBasePositionAndOrientation(self.robot, (0.0, 0.0, 100.0), (0, 0, 0, 1), physicsClientId=self.client)
+            pb.performCollisionDetection(physicsClientId=self.client)
+            pb.restoreState(self._saved, physicsClientId=self.client)
+        if p.start_noise > 0:
+            offsets = np.random.default_rng(request.seed).normal(0.0, p.start_noise, N)
+            start = np.clip(self._start_pose + offsets, LOWER, UPPER)
+            for i, angle in zip(self.joint_index, start.tolist(), strict=True):
+                pb.resetJointState(self.robot, i, angle, 0.0, physicsClientId=self.client)
+        self.ticks, self.t = 0, 0.0
+        self.energy = 0.0  # E_e (5.6), J
+        self.tau = np.zeros(N)
+        self.fell = self.left_lane = self.finished = False
+        self.finish_time = math.nan
+        self._read_joints()
+        self._read_torso()
+        # a logged trial keeps samples of its signals and pictures of the body at the sink's rates
+        rates = rates_of(self.telemetry)
+        self._signal_every = rates.signal_every(p.control_dt)
+        self._picture_every = rates.picture_every(p.control_dt)
+        self._trace = [] if self.logging else None  # (t, sensor values, motor power W)
+        self._frames = [] if self.logging else None  # (t, link poses, feet's centre of pressure and force)
+        self._pushes = [] if self.logging else None  # (t, torso centre of mass, force) every physics step of a push
+
+    def _build(self, pieces: tuple[tuple[float, float], ...]) -> None:
+        """A new world: the ground of ``pieces``, the robot standing at x = 0 on it; saved for the next trials."""
+        p, c = self.params, self.client
+        if self._saved is not None:
+            pb.removeState(self._saved, physicsClientId=c)
+        pb.resetSimulation(physicsClientId=c)
+        pb.setPhysicsEngineParameter(
+            fixedTimeStep=p.control_dt / p.substeps,
+            numSolverIterations=p.solver_iterations,
+            deterministicOverlappingPairs=1,
+            physicsClientId=c,
+        )
+        pb.setGravity(0.0, 0.0, -G, physicsClientId=c)
+        self._build_ground(pieces)
+        self.robot = pb.loadURDF(urdf_path(), flags=pb.URDF_USE_INERTIA_FROM_FILE, physicsClientId=c)
+        names = {pb.getJointInfo(self.robot, i, physicsClientId=c)[1].decode(): i for i in range(N)}
+        self.joint_index = [names[name] for name in JOINT_NAMES]
+        self.link_index = {"torso": -1} | {j.child: names[j.name] for j in JOINTS}  # a link's index = its joint's
+        self.foot_index = [self.link_index[foot] for foot in FEET]
+        self._picture_links = [self.link_index[link] for link in LINKS[1:]]  # the pictures' order
+        for link in self.link_index.values():  # friction is the product of both sides': the ground's sets it
+            pb.changeDynamics(self.robot, link, lateralFriction=1.0, physicsClientId=c)
+        # the base's inertial frame (centre of mass, principal axes) relative to the torso's own frame
+        info = pb.getDynamicsInfo(self.robot, -1, physicsClientId=c)
+        self._inertial = (info[3], info[4])
+        self._to_link = pb.invertTransform(*self._inertial)
+        self._place(pieces[0][1])
+        self._world_key = pieces
+        self._saved = pb.saveState(physicsClientId=c)
+
+    def _build_ground(self, pieces) -> None:
+        """Static boxes whose top faces follow the profile: the pieces, the first one extended back by a
+        run-up, the last one forward by a run-out."""
+        c = self.client
+        lengths = [length for length, _ in pieces]
+        lengths[0] += RUN_UP  # the run-up is part of the first piece: no seam under the start
+        lengths[-1] += RUN_OUT
+        first = pieces[0][1]
+        points = [(-RUN_UP * math.cos(first), -RUN_UP * math.sin(first))]
+        for length, (_, slope) in zip(lengths, pieces, strict=True):
+            x, z = points[-1]
+            points.append((x + length * math.cos(slope), z + length * math.sin(slope)))
+        self.ground_x, self.ground_z = np.array(points).T
+        self.ground_boxes = []  # (centre, half sizes, quaternion) for the pictures
+        for (x0, z0), (x1, z1) in zip(points[:-1], points[1:], strict=True):
+            length, slope = math.hypot(x1 - x0, z1 - z0), math.atan2(z1 - z0, x1 - x0)
+            half = (length / 2, GROUND_WIDTH / 2, GROUND_THICKNESS / 2)
+            centre = ((x0 + x1) / 2 + math.sin(slope) * half[2], 0.0, (z0 + z1) / 2 - math.cos(slope) * half[2])
+            turn = pb.getQuaternionFromEuler((0.0, -slope, 0.0))
+            shape = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=half, physicsClientId=c)
+            ground = pb.createMultiBody(0.0, shape, -1, centre, turn, physicsClientId=c)
+            pb.changeDynamics(ground, -1, lateralFriction=self.params.friction, physicsClientId=c)
+            self.ground_boxes.append((centre, half, turn))
+
+    def ground_height(self, x: float) -> float:
+        return float(np.interp(x, self.ground_x, self.ground_z))
+
+    def _place(self, slope: float) -> None:
+        """Stand the robot at x = 0: the standing pose with the ankles pitched by ``slope`` (soles on the
+        ground), the torso as upright as the pose makes it, its centre of mass at x = 0, soles just above."""
+        c, robot = self.client, self.robot
+        pose = np.array([STANDING[name] for name in JOINT_NAMES])
+        pose[[JOINT_NAMES.index("ankle_pitch_l"), JOINT_NAMES.index("ankle_pitch_r")]] -= slope
+        self._start_pose = pose
+        # feet flat: the torso's pitch cancels the legs' pitch sum (hip + knee + ankle, all about y)
+        lean = -(STANDING["hip_pitch_l"] + STANDING["knee_l"] + STANDING["ankle_pitch_l"])
+        for i, angle in zip(self.joint_index, pose.tolist(), strict=True):
+            pb.resetJointState(self.robot, i, angle, 0.0, physicsClientId=c)
+        self._set_torso((0.0, 0.0, 1.0), pb.getQuaternionFromEuler((0.0, lean, 0.0)))
+        com = pb.getBasePositionAndOrientation(robot, physicsClientId=c)[0]
+        lowest = math.inf
+        states = pb.getLinkStates(robot, self.foot_index, computeForwardKinematics=1, physicsClientId=c)
+        for foot, state in zip(FEET, states, strict=True):
+            sole = next(part for part in PARTS if part.link == foot and part.collides)
+            corners = [
+                (sole.com[0] + dx * sole.size[0] / 2, sole.com[1] + dy * sole.size[1] / 2, -SOLE)
+                for dx in (-1, 1)
+                for dy in (-1, 1)
+            ]
+            position, turn = np.array(state[4]), np.tile(state[5], (4, 1))
+            world = position + _rotate(turn, np.array(corners))
+            gaps = world[:, 2] - np.interp(world[:, 0] - com[0], self.ground_x, self.ground_z)
+            lowest = min(lowest, float(gaps.min()))
+        base = pb.getBasePositionAndOrientation(robot, physicsClientId=c)
+        shifted = (base[0][0] - com[0], base[0][1], base[0][2] - lowest + CLEARANCE)
+        pb.resetBasePositionAndOrientation(robot, shifted, base[1], physicsClientId=c)
+        self._read_torso()
+        self.start_height = self.torso_position[2] - self.ground_height(self.torso_position[0])
+
+    def _set_torso(self, position, orientation) -> None:
+        """Put the torso's own frame (not its centre of mass) at this pose."""
+        com = pb.multiplyTransforms(position, orientation, *self._inertial)
+        pb.resetBasePositionAndOrientation(self.robot, *com, physicsClientId=self.client)
+
+    # ------------------------------------------------------------------ sensing
+    def _read_joints(self) -> None:
+        states = pb.getJointStates(self.robot, self.joint_index, physicsClientId=self.client)
+        q, dq, _, tau = zip(*states, strict=True)
+        self.q, self.dq, self.tau = np.array(q), np.array(dq), np.array(tau)
+
+    def _read_torso(self) -> None:
+        """The torso's centre of mass, its own frame's rotation matrix, and its spin in that frame."""
+        c = self.client
+        position, orientation = pb.getBasePositionAndOrientation(self.robot, physicsClientId=c)
+        spin = pb.getBaseVelocity(self.robot, physicsClientId=c)[1]
+        turn = pb.multiplyTransforms((0, 0, 0), orientation, *self._to_link)[1]
+        self.torso_position = position
+        self.torso_turn = np.array(pb.getMatrixFromQuaternion(turn)).reshape(3, 3)
+        self.torso_spin = self.torso_turn.T @ spin  # gyro: body frame
+
+    def _foot_pressure(self) -> list[float]:
+        """The 8 FSR forces (N, FSR_NAMES order): each sole contact's normal force shared bilinearly between
+        the toe and heel rows and the inner and outer columns of its foot's sensors (the shares add up to
+        the force; a contact beyond a row or column counts as on it). Plain floats: a foot has few contacts."""
+        c, robot = self.client, self.robot
+        toe_x, heel_x = FSR_X
+        inner_y, outer_y = FSR_Y
+        fsr = [0.0] * 8
+        for k, foot in enumerate(self.foot_index):
+            contacts = pb.getContactPoints(bodyA=robot, linkIndexA=foot, physicsClientId=c)
+            if not contacts:
+                continue
+            origin, turn = pb.getLinkState(robot, foot, physicsClientId=c)[4:6]
+            r = pb.getMatrixFromQuaternion(turn)  # row-major; the foot's axes are its columns
+            side = 1.0 if k == 0 else -1.0  # the right foot is the left's mirror image in y
+            for contact in contacts:
+                dx, dy, dz = (contact[5][i] - origin[i] for i in range(3))
+                x = r[0] * dx + r[3] * dy + r[6] * dz  # into the foot's frame
+                y = side * (r[1] * dx + r[4] * dy + r[7] * dz)
+                toe = min(max((x - heel_x) / (toe_x - heel_x), 0.0), 1.0)
+                outer = min(max((y - inner_y) / (outer_y - inner_y), 0.0), 1.0)
+                force = contact[9]
+                fsr[4 * k] += force * toe * (1 - outer)
+                fsr[4 * k + 1] += force * toe * outer
+                fsr[4 * k + 2] += force * (1 - toe) * (1 - outer)
+                fsr[4 * k + 3] += force * (1 - toe) * outer
+        return fsr
+
+    def sense(self) -> np.ndarray:
+        fsr = self._foot_pressure()
+        up = self.torso_turn[2]  # the world's vertical in the torso's frame
+        imu = [math.atan2(-up[0], up[2]), math.atan2(up[1], up[2]), self.torso_spin[1], self.torso_spin[0]]
+        feet = [fsr[2] + fsr[3], fsr[0] + fsr[1], fsr[6] + fsr[7], fsr[4] + fsr[5]]  # heel_l, toe_l, heel_r, toe_r
+        values = np.concatenate([self.q, self.dq, self.tau, feet, fsr, imu])
+        return np.minimum(np.maximum(values, SENSOR_LOW), SENSOR_HIGH)  # the sensors saturate
+
+    # ------------------------------------------------------------------ acting
+    def actuate(self, command: np.ndarray) -> None:
+        p, c, robot, joints = self.params, self.client, self.robot, self.joint_index
+        target = np.minimum(np.maximum(command, LOWER), UPPER)
+        h = p.control_dt / p.substeps
+        for k in range(p.substeps):
+            error = target - self.q
+            speed = np.minimum(np.maximum(p.servo_rate * error, -SPEED), SPEED)  # the servo's speed target
+            torque = np.minimum(p.servo_stiffness * np.abs(error) + HOLD_TORQUE, EFFORT)  # the most it may use
+            pb.setJointMotorControlArray(
+                robot,
+                joints,
+                pb.VELOCITY_CONTROL,
+                targetVelocities=speed.tolist(),
+                forces=torque.tolist(),
+                physicsClientId=c,
+            )
+            if self.push_force > 0 and self.push_start <= self.t + k * h < self.push_end:
+                self._push(self.t + k * h)  # an external force lasts one step: applied every step of the push
+            pb.stepSimulation(physicsClientId=c)
+            self._read_joints()
+            self.energy += float(MOTOR @ self.tau**2) * h  # (5.5)-(5.6)
+        self.ticks += 1
+        self.t = self.ticks * p.control_dt
+        self._read_torso()
+        self._judge()
+        if self._trace is not None:
+            tick = self.ticks - 1
+            if tick % self._signal_every == 0:
+                self._trace.append((self.t, self.sense(), float(MOTOR @ self.tau**2)))
+            if tick % self._picture_every == 0:
+                self._record_frame()
+
+    def _push(self, t: float) -> None:
+        com = pb.getBasePositionAndOrientation(self.robot, physicsClientId=self.client)[0]
+        pb.applyExternalForce(
+            self.robot, -1, self.push_vector.tolist(), com, pb.WORLD_FRAME, physicsClientId=self.client
+        )
+        if self._pushes is not None:
+            self._pushes.append((t, com, self.push_vector))
+
+    def _judge(self) -> None:
+        """Fall, lane, finish line (once per control tick)."""
+        p = self.params
+        x, y, z = self.torso_position
+        up = self.torso_turn[2]
+        pitch, roll = math.atan2(-up[0], up[2]), math.atan2(up[1], up[2])
+        limit = math.radians(p.fall_angle_deg)
+        low = z - self.ground_height(x) < p.fall_height_fraction * self.start_height
+        self.fell = low or abs(pitch) > limit or abs(roll) > limit
+        self.left_lane = abs(y) > p.lane_half_width
+        if x >= p.finish_line and not (self.fell or self.left_lane):
+            self.finished = True
+            self.finish_time = self.t
+
+    @property
+    def done(self) -> bool:
+        return self.fell or self.left_lane or self.finished or self.t >= self.params.duration - 1e-9
+
+    def outcome(self) -> tuple[bool, float, dict]:
+        p = self.params
+        distance = float(self.torso_position[0])
+        success = self.finished
+        # (5.7)-(5.8): E_k = m v_a^2 / 2 with v_a = trajectory length / time; eta = E_k / E_e
+        eta = 0.0
+        if success and self.energy > 0:
+            eta = 0.5 * TOTAL_MASS * (p.finish_line / self.finish_time) ** 2 / self.energy
+        metrics = {
+            "distance": distance,
+            "lateral": float(self.torso_position[1]),
+            "time": self.t,
+            "velocity": distance / self.t if self.t > 0 else 0.0,
+            "energy": self.energy,
+            "mean_power": self.energy / self.t if self.t > 0 else 0.0,
+            "fell": self.fell,
+            "left_lane": self.left_lane,
+            "timed_out": not (success or self.fell or self.left_lane),
+        }
+        return success, eta, metrics
+
+    # ------------------------------------------------------------------ telemetry
+    def _record_frame(self) -> None:
+        """Where every link is (torso frame and the 12 child frames) and the feet's contact forces."""
+        c, robot = self.client, self.robot
+        com, orientation = pb.getBasePositionAndOrientation(robot, physicsClientId=c)
+        torso = pb.multiplyTransforms(com, orientation, *self._to_link)
+        states = pb.getLinkStates(robot, self._picture_links, physicsClientId=c)
+        poses = [torso] + [(s[4], s[5]) for s in states]
+        forces = []
+        contacts = pb.getContactPoints(bodyA=robot, physicsClientId=c)
+        for foot in self.foot_index:
+            points = [ct for ct in contacts if ct[3] == foot]
+            total = sum(ct[9] for ct in points)
+            if total <= 0:
+                forces.append(np.zeros(6))
+                continue
+            centre = sum(np.array(ct[5]) * ct[9] for ct in points) / total  # centre of pressure
+            force = sum(np.array(ct[7]) * -ct[9] for ct in points)  # on the foot (normal on B points to A)
+            forces.append(np.concatenate([centre, force]))
+        self._frames.append((self.t, poses, np.array(forces)))
+
+    def log_trial(self, trial_id: int) -> None:
+        """A logged trial on ``sim_time`` (trial k starts at k x duration): joint and torso angles (deg), foot
+        pressures (N) and motor power (W) at ``rates.signals_hz``; every NAO link as a box and the feet's
+        contact forces as arrows (side view: x, z) at ``rates.pictures_hz``; the ground's boxes; a push as
+        arrows at its every physics step and an event. (The trial's start and end: ``Body.log_outcome``.)"""
+        if self.telemetry is None or not self._trace:
+            return
+        emit, t0 = self.telemetry.emit, trial_id * self.params.duration
+        t = np.array([row[0] for row in self._trace])
+        values = np.stack([row[1] for row in self._trace])
+        power = np.array([row[2] for row in self._trace])
+        times = t0 + t
+        for j, name in enumerate(JOINT_NAMES):
+            emit(series(f"joints/{name}", trial_id, times, np.degrees(values[:, j]), "deg"))
+        index = {s.name: i for i, s in enumerate(SENSORS)}
+        for name in ("torso_pitch", "torso_roll"):
+            emit(series(f"torso/{name[6:]}", trial_id, times, np.degrees(values[:, index[name]]), "deg"))
+        for name in ("heel_l", "toe_l", "heel_r", "toe_r"):
+            emit(series(f"feet/{name}", trial_id, times, values[:, index[name]], "N"))
+        emit(series("power", trial_id, times, power, "W"))
+        self._log_pictures(trial_id, t0)
+        if self._pushes:
+            pushes = self._pushes
+            emit(
+                Arrows2D(
+                    "side/push",
+                    trial_id,
+                    t0 + np.array([row[0] for row in pushes]),
+                    np.array([(row[1][0], row[1][2]) for row in pushes]),
+                    np.array([(row[2][0], row[2][2]) for row in pushes]) / 100.0,  # 1 m per 100 N
+                )
+            )
+            what = f"push {self.push_force:g} N for {self.push_end - self.push_start:g} s"
+            emit(Event("events", trial_id, t0 + pushes[0][0], what))
+
+    def _log_pictures(self, trial_id: int, t0: float) -> None:
+        frames = self._frames
+        times = t0 + np.array([f[0] for f in frames])
+        order = {link: k for k, link in enumerate(LINKS)}  # poses are in LINKS order (torso, then its children)
+        owner = np.array([order[p.link] for p in PARTS])
+        positions = np.array([[pose[0] for pose in f[1]] for f in frames])[:, owner].reshape(-1, 3)
+        turns = np.array([[pose[1] for pose in f[1]] for f in frames])[:, owner].reshape(-1, 4)
+        offsets = np.tile(np.array([p.com for p in PARTS]), (len(frames), 1))
+        colors = np.array([_color(p) for p in PARTS], dtype=np.uint8)
+        halves = np.array([p.size for p in PARTS]) / 2
+        self.telemetry.emit(
+            Boxes3D("robot", trial_id, times, positions + _rotate(turns, offsets), halves, turns, len(PARTS), colors)
+        )
+        ground = self.ground_boxes
+        self.telemetry.emit(
+            Boxes3D(
+                "ground",
+                trial_id,
+                times[:1],
+                np.array([g[0] for g in ground]),
+                np.array([g[1] for g in ground]),
+                np.array([g[2] for g in ground]),
+                len(ground),
+                np.tile(np.array([(120, 100, 80)], dtype=np.uint8), (len(ground), 1)),
+            )
+        )
+        forces = np.stack([f[2] for f in frames])  # (frames, foot, centre + force)
+        for k, foot in enumerate(FEET):
+            self.telemetry.emit(
+                Arrows2D(
+                    f"side/contact_{foot[-1]}",
+                    trial_id,
+                    times,
+                    forces[:, k][:, [0, 2]],
+                    forces[:, k][:, [3, 5]] / 100.0,  # 1 m per 100 N
+                    (40, 180, 80),
+                )
+            )
+
+    def close(self) -> None:
+        """Disconnect this body's PyBullet client."""
+        if self.client is not None:
+            pb.disconnect(physicsClientId=self.client)
+            self.client, self._world_key, self._saved = None, None, None
+
+
+def _color(part) -> tuple[int, int, int]:
+    """Left limbs blue, right limbs orange, torso and head grey."""
+    if part.link.endswith("_l"):
+        return (40, 110, 220)
+    if part.link.endswith("_r"):
+        return (230, 140, 30)
+    return (150, 150, 150)
