@@ -7,6 +7,11 @@
 * learn runs at two or more fixed vigilance values: success rate against s_vig, every seed a dot,
   the mean a line, the thesis's E3.2 values as crosses (Fig. 3.13), and a table of the means.
 
+Runs whose controller is the CPG (chapter 4, E4.2) get the figures and tables of :mod:`.report_cpg` instead of
+the generic map figure: the maps over (sigma_s, sigma_f) with each neuron's pattern, the energy order of the map
+neurons (Fig. 4.16), the success rate over trials and a gait strip. When every run is one, the page is named
+after the scenario (``e4_2_learn.md``) instead of ``README.md``.
+
 Only ``completed`` runs enter a mean. A stalled, failed, interrupted or unfinished run keeps its row
 (its status and stop reason shown) and is listed under the figure as left out.
 """
@@ -24,6 +29,7 @@ import numpy as np  # noqa: E402
 import yaml  # noqa: E402
 
 from .records import read_records, run_status, summarise  # noqa: E402
+from .report_cpg import cpg_run, is_cpg_run, write_cpg_sections  # noqa: E402
 
 
 def _figure(run_dir: Path, out: Path, scenario: dict, rows: list[dict]) -> str:
@@ -131,6 +137,8 @@ def write_report(run_dirs: list[Path], out: Path) -> Path:
     group_thesis: dict[str, dict] = {}
     left_out: dict[str, list[str]] = {}
     statuses: dict[str, dict] = {}
+    cpg_results: list[dict] = []
+    summaries: dict[str, dict] = {}
     lines = [
         "| run | status | protocol | s_vig | trials | success rate | thesis | figure |",
         "|---|---|---|---|---|---|---|---|",
@@ -138,7 +146,7 @@ def write_report(run_dirs: list[Path], out: Path) -> Path:
     for run_dir in run_dirs:
         scenario = yaml.safe_load((run_dir / "scenario.yaml").read_text())
         rows = read_records(run_dir)
-        summary = summarise(rows)
+        summary = summaries[str(run_dir)] = summarise(rows)
         status, why = run_status(run_dir)
         statuses[str(run_dir)] = {"status": status, "stop_reason": why}
         completed = status == "completed"
@@ -147,7 +155,11 @@ def write_report(run_dirs: list[Path], out: Path) -> Path:
         learn = scenario["protocol"]["kind"] == "learn"
         rates = _thesis(scenario["name"]) if learn else {}
         thesis = f"{rates[s_vig]:.0%}" if isinstance(s_vig, int | float) and s_vig in rates else ""
-        figure = _figure(run_dir, out, scenario, rows)
+        if is_cpg_run(scenario):
+            cpg_results.append(cpg_run(run_dir, out, scenario, status))
+            figure = next(iter(cpg_results[-1]["figures"]), "")
+        else:
+            figure = _figure(run_dir, out, scenario, rows)
         rate = summary["success_rate"]
         if learn and isinstance(s_vig, int | float):
             group = "-".join(a["name"] for a in scenario["space"])
@@ -176,15 +188,18 @@ def write_report(run_dirs: list[Path], out: Path) -> Path:
             ]
             vigilance_lines += [f"- {text}" for text in left_out[group]]
     unfinished = [d for d, st in statuses.items() if st["status"] != "completed"]
-    head = "# Results\n\n"
+    vigilance_lines += write_cpg_sections(cpg_results) if cpg_results else []
+    names = sorted({r["scenario"] for r in cpg_results})
+    stem = names[0] if len(cpg_results) == len(run_dirs) and len(names) == 1 else None
+    head = f"# Results of {stem} (`sfl report`)\n\n" if stem else "# Results\n\n"
     if unfinished:
         head += (
             f"{len(unfinished)} of {len(run_dirs)} runs did not complete (status in bold); "
             "they are shown but enter no mean.\n\n"
         )
-    path = out / "README.md"
+    path = out / (f"{stem}.md" if stem else "README.md")
     path.write_text(head + "\n".join(lines + vigilance_lines) + "\n")
-    (out / "summary.json").write_text(
-        json.dumps({str(d): {**statuses[str(d)], **summarise(read_records(d))} for d in run_dirs}, indent=1)
+    (out / (f"{stem}_summary.json" if stem else "summary.json")).write_text(
+        json.dumps({str(d): {**statuses[str(d)], **summaries[str(d)]} for d in run_dirs}, indent=1)
     )
     return path
