@@ -61,6 +61,8 @@ alternating. Quality eta: walking efficiency (5.7)-(5.8), kinetic energy at the 
 
 Start: standing, feet flat, pelvis and trunk upright, at rest; ``initial_knee`` bends the knees
 (hips and ankles half as much, the hip above the ankles), ``initial_step`` puts the left foot ahead.
+``start_noise`` (chosen here, as the humanoid's, for experiments over seeds: E4.3, E4.4) makes the start differ by
+the trial seed: a normal offset of that s.d. added to the crouch (rad) and a forward speed of all links (m/s).
 
 Physics: pymunk, 10 steps of 1 ms per 10-ms control tick, 20 solver iterations (chosen by probing:
 with fewer, the joints of the 9-kg trunk over 0.5-kg feet go soft and a standing walker rocks onto its
@@ -237,6 +239,13 @@ class PlanarWalker8Params(BodyParams):
     initial_knee: float = Field(
         0.0, ge=-1.0, le=0.0, description="rad: knee angle at the start (hips and ankles flex half as much each)"
     )
+    start_noise: float = Field(
+        0.0,
+        ge=0,
+        le=0.2,
+        description="s.d. of the start's offsets, drawn from the trial seed: the crouch (rad, added to initial_knee) "
+        "and the whole walker's forward speed (m/s); 0 = the same start every trial",
+    )
 
 
 class PlanarWalker8(Body):
@@ -279,7 +288,13 @@ class PlanarWalker8(Body):
         space.collision_slop = 0.0005
         self.space = space
         self._build_ground()
-        self._build_walker(x_hip=0.3)
+        knee, speed = p.initial_knee, 0.0
+        if p.start_noise > 0:  # as the humanoid's start_noise: the trial seed draws the start (E4.3, E4.4 seeds)
+            offsets = np.random.default_rng(request.seed).normal(0.0, p.start_noise, 2)
+            knee, speed = min(max(knee + float(offsets[0]), -1.0), 0.0), float(offsets[1])
+        self._build_walker(x_hip=0.3, knee=knee)
+        for link in self.links:
+            link.velocity = (speed, 0.0)
         self._batch_buffers()
         self.t = 0.0
         self.energy = 0.0
@@ -342,9 +357,9 @@ class PlanarWalker8(Body):
         centre = pymunk.Vec2d(*top) + pymunk.Vec2d(0, -half).rotated(angle)
         return self._link(mass, (0.04, length), centre, angle, [pymunk.Segment(None, (0, half), (0, -half), 0.02)])
 
-    def _build_walker(self, x_hip: float) -> None:
+    def _build_walker(self, x_hip: float, knee: float) -> None:
         """Standing, feet flat on the ground, pelvis and trunk upright; the left ankle ``initial_step``
-        ahead of the right; the hip as high as both legs reach with their knees bent ``initial_knee``,
+        ahead of the right; the hip as high as both legs reach with their knees bent ``knee``,
         each leg's knee then bent as its ankle needs (two-link inverse kinematics)."""
         p = self.params
         ankles = []
@@ -356,7 +371,7 @@ class PlanarWalker8(Body):
             ankle = pymunk.Vec2d(x, float(self.ground_height(x))) + up * (GROUND_R + FOOT_THICK)
             ankles.append((ankle, slope))
         reach = THIGH + SHANK
-        bent = reach * math.cos(p.initial_knee / 2)  # hip to ankle with the knee at initial_knee
+        bent = reach * math.cos(knee / 2)  # hip to ankle with the knee at ``knee`` (initial_knee, noised)
         hip_y = min(a.y + math.sqrt(max(bent**2 - (a.x - x_hip) ** 2, 0.0)) for a, _ in ankles)
         hip = pymunk.Vec2d(x_hip, hip_y)
         pelvis = self._link(
