@@ -100,9 +100,6 @@ MAX_PUSH = 200.0  # N: the hardest push a trial may ask for (chosen here: ~4 bod
 MAX_JOINT_SPEED = 25.0  # rad/s: velocity sensor range (chosen here: 3 x the fastest no-load joint speed, 8.3)
 MAX_FSR = 100.0  # N per pressure sensor (chosen here: 2 body weights; reached only in impacts)
 MAX_GYRO = 20.0  # rad/s: gyro range (chosen here)
-RUN_UP = 1.0  # m of ground behind the start, along the first piece
-RUN_OUT = 20.0  # m of ground after the last piece
-GROUND_WIDTH = 2.0  # m: wider than the lane (+-0.5 m)
 GROUND_THICKNESS = 0.2  # m
 CLEARANCE = 0.0005  # m between the soles and the ground at the start
 HOLD_TORQUE = 0.05  # N m: what a servo resists with at zero error (chosen here: about NAO's joint friction)
@@ -248,6 +245,9 @@ class HumanoidParams(BodyParams):
     fall_height_fraction: float = Field(0.5, gt=0, lt=1, description="fall: torso CoM below this x its start height")
     fall_angle_deg: float = Field(45.0, gt=0, le=180, description="fall: |torso pitch| or |roll| over this, deg")
     start_noise: float = Field(0.0, ge=0, le=0.2, description="rad: s.d. of the start's joint offsets (trial seed)")
+    run_up: float = Field(1.0, gt=0, le=100, description="m of ground behind the start, along the first piece")
+    run_out: float = Field(20.0, gt=0, le=1000, description="m of ground after the last piece")
+    ground_width: float = Field(2.0, gt=0, le=1000, description="m: the ground's width (the lane is +-0.5 m)")
 
 
 class Humanoid(Body):
@@ -362,12 +362,12 @@ class Humanoid(Body):
     def _build_ground(self, pieces) -> None:
         """Static boxes whose top faces follow the profile: the pieces, the first one extended back by a
         run-up, the last one forward by a run-out."""
-        c = self.client
+        c, p = self.client, self.params
         lengths = [length for length, _ in pieces]
-        lengths[0] += RUN_UP  # the run-up is part of the first piece: no seam under the start
-        lengths[-1] += RUN_OUT
+        lengths[0] += p.run_up  # the run-up is part of the first piece: no seam under the start
+        lengths[-1] += p.run_out
         first = pieces[0][1]
-        points = [(-RUN_UP * math.cos(first), -RUN_UP * math.sin(first))]
+        points = [(-p.run_up * math.cos(first), -p.run_up * math.sin(first))]
         for length, (_, slope) in zip(lengths, pieces, strict=True):
             x, z = points[-1]
             points.append((x + length * math.cos(slope), z + length * math.sin(slope)))
@@ -375,12 +375,12 @@ class Humanoid(Body):
         self.ground_boxes = []  # (centre, half sizes, quaternion) for the pictures
         for (x0, z0), (x1, z1) in zip(points[:-1], points[1:], strict=True):
             length, slope = math.hypot(x1 - x0, z1 - z0), math.atan2(z1 - z0, x1 - x0)
-            half = (length / 2, GROUND_WIDTH / 2, GROUND_THICKNESS / 2)
+            half = (length / 2, p.ground_width / 2, GROUND_THICKNESS / 2)
             centre = ((x0 + x1) / 2 + math.sin(slope) * half[2], 0.0, (z0 + z1) / 2 - math.cos(slope) * half[2])
             turn = pb.getQuaternionFromEuler((0.0, -slope, 0.0))
             shape = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=half, physicsClientId=c)
             ground = pb.createMultiBody(0.0, shape, -1, centre, turn, physicsClientId=c)
-            pb.changeDynamics(ground, -1, lateralFriction=self.params.friction, physicsClientId=c)
+            pb.changeDynamics(ground, -1, lateralFriction=p.friction, physicsClientId=c)
             self.ground_boxes.append((centre, half, turn))
 
     def ground_height(self, x: float) -> float:

@@ -615,7 +615,7 @@ class PlanarWalker8(Body):
         pictured = ticks % rates.picture_every(p.control_dt) == 0
         points = _picture_points(poses[pictured])
         strips = points[:, _STRIPS].reshape(-1, _STRIPS.shape[1], 2)  # (pictures x 6, 4, 2)
-        sink.emit(Strips2D("walker", trial_id, times[pictured], strips, len(_STRIPS), _COLORS))
+        sink.emit(Strips2D("walker", trial_id, times[pictured], strips, len(_STRIPS), _COLORS, follow=True))
         hip_x = points[:, 2, 0]
         gx = np.linspace(float(hip_x.min()) - 1.0, float(hip_x.max()) + 1.0, 80)
         ground = np.column_stack([gx, self.ground_height(gx) + GROUND_R])

@@ -14,10 +14,11 @@ The script prints, as Markdown:
 1. the default gait (1, 0) and the thesis's values (-0.2, 0.15) on the slope and on the flat;
 2. a grid around the thesis's values, alpha_MLR -0.4..0 x theta_MLR 0.05..0.25;
 3. a grid where this circuit climbs, alpha_MLR 0.8..1.2 x theta_MLR -1.8..-1.2 (found by a coarse search over
-   alpha_MLR -0.2..1.5 x theta_MLR -2..1, docs/results/chapter4/humanoid.md);
+   alpha_MLR -0.2..1.5 x theta_MLR -2..1 while this script was written; that search is not part of it);
 
 each cell ``k/n`` = successes over ``--seeds`` seeds (the body's ``start_noise`` 0.02 rad), with the mean time of the
-successes. Controller and body in one process. About 40 s on 2 shared cores.
+successes. Controller and body in one process. About 40 s on 2 quiet cores (149 s at load average 5-6). Results:
+docs/results/chapter4/humanoid.md.
 """
 
 from __future__ import annotations

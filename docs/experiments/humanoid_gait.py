@@ -1,6 +1,7 @@
 """The humanoid's default CPG gait: where the gains and offsets of ``humanoid_nao.yaml`` come from; does it walk.
 
-    python docs/experiments/humanoid_gait.py [--calibrate] [--walk 10] [--noise 0.02] [--set KEY=VALUE ...]
+    python docs/experiments/humanoid_gait.py [--calibrate] [--walk 10] [--noise 0.02] [--alpha-mlr 1 ...]
+                                             [--set KEY=VALUE ...]
 
 The circuit ``modules/cpg/circuits/humanoid_nao.yaml`` sets each joint's command theta_0 + G (MN_E - MN_F) (digest
 §5, §7.8). Neither G nor theta_0 is in the thesis; they are computed here from two conditions:
@@ -21,7 +22,8 @@ The circuit ``modules/cpg/circuits/humanoid_nao.yaml`` sets each joint's command
 ``--calibrate`` iterates both conditions (G scaled by target / measured amplitude, theta_0 re-solved, 6 rounds) and
 prints the values the circuit should hold; without it the script prints what the circuit as shipped gives. ``--walk N``
 then runs N trials (seeds 0..N-1, the body's ``start_noise`` ``--noise`` rad) of the gait on the flat, controller and
-body in one process, and prints each trial's outcome. ``--set`` overrides a circuit value by key path, as the
+body in one process, and prints each trial's outcome; ``--alpha-mlr`` repeats them with other slopes alpha_MLR of (4.9)
+(the sweep of scenarios/humanoid_walk.yaml). ``--set`` overrides a circuit value by key path, as the
 controller's ``circuit_overrides``. About 10 s for the calibration on 2 shared cores, 0.5 s per walking trial.
 """
 
@@ -136,18 +138,24 @@ def report(data: dict, frame: np.ndarray, shipped: dict) -> None:
         )
 
 
-def walk(overrides: dict, trials: int, noise: float) -> None:
+def walk(overrides: dict, trials: int, noise: float, alpha_mlr: list[float]) -> None:
+    """``trials`` seeds of the gait on the flat, for each descending-control slope alpha_MLR of (4.9)."""
     body = Humanoid(Humanoid.Params(start_noise=noise))
     body.link = InProcessLink(CPGController(CPGParams(circuit="humanoid_nao", circuit_overrides=overrides)))
-    print("| seed | success | time s | distance m | lateral m | eta |")
-    print("|---|---|---|---|---|---|")
-    for seed in range(trials):
-        result = body.handle(TrialRequest(trial_id=seed, seed=seed, body_params={}, controller_params={}, log=False))
-        m = result.metrics
-        print(
-            f"| {seed} | {result.success} | {m['time']:.2f} | {m['distance']:.2f} | {m['lateral']:+.2f} | "
-            f"{result.quality:.5f} |"
-        )
+    print("| alpha_MLR | seed | success | time s | distance m | lateral m | eta |")
+    print("|---|---|---|---|---|---|---|")
+    for alpha in alpha_mlr:
+        for seed in range(trials):
+            controller_params = {} if alpha == 1.0 else {"alpha_mlr": alpha}
+            request = TrialRequest(
+                trial_id=seed, seed=seed, body_params={}, controller_params=controller_params, log=False
+            )
+            result = body.handle(request)
+            m = result.metrics
+            print(
+                f"| {alpha:g} | {seed} | {result.success} | {m['time']:.2f} | {m['distance']:.2f} | "
+                f"{m['lateral']:+.2f} | {result.quality:.5f} |"
+            )
     body.close()
 
 
@@ -156,6 +164,7 @@ def main() -> None:
     parser.add_argument("--calibrate", action="store_true")
     parser.add_argument("--walk", type=int, default=0, help="trials of the gait on the flat")
     parser.add_argument("--noise", type=float, default=0.02, help="the body's start_noise, rad")
+    parser.add_argument("--alpha-mlr", type=float, nargs="+", default=[1.0], help="(4.9) slopes to walk with")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     args = parser.parse_args()
     overrides = {}
@@ -173,7 +182,7 @@ def main() -> None:
         overrides = {**overrides, **calibrated}
     report(data, frame, shipped)
     if args.walk:
-        walk(overrides, args.walk, args.noise)
+        walk(overrides, args.walk, args.noise, args.alpha_mlr)
 
 
 if __name__ == "__main__":
