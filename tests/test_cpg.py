@@ -437,6 +437,27 @@ def test_pattern_switch_sets_the_pattern_resets_the_cell_and_takes_the_measured_
     np.testing.assert_array_equal(network.theta0, theta0)
 
 
+
+def test_a_continuous_switch_keeps_the_command_at_the_measured_angle_where_the_thesis_jumps():
+    commands = {}
+    for theta0 in ("angle", "continuous"):
+        data = read_circuit_data("humanoid_nao")
+        data["switches"] = [{"joints": {"knee_l": {"sigma_s": 5.0, "sigma_f": 17.5}}, "at": 1.0, "theta0": theta0}]
+        circuit = validate_circuit(data)
+        network = CPGNetwork(circuit)
+        knee = circuit.joint_index("knee_l")
+        sensors = np.zeros(len(circuit.inputs))
+        sensors[circuit.inputs.index("knee_l")] = 0.9
+        for _ in range(100):
+            network.advance(sensors)
+        before = network.command()[knee]
+        network.advance(sensors)  # the switch's tick
+        commands[theta0] = (before, network.command()[knee], network.theta0[0, knee])
+    before, after, theta0 = commands["angle"]
+    assert theta0 == 0.9 and abs(after - 0.9) > 0.1  # theta_0 := angle: the reflexes' offset makes the command jump
+    before_c, after_c, theta0_c = commands["continuous"]
+    assert before_c == before and after_c == pytest.approx(0.9, abs=1e-12) and theta0_c != 0.9
+
 # ------------------------------------------------------------------------------------------------
 # Circuit files: checking and overriding
 # ------------------------------------------------------------------------------------------------

@@ -163,9 +163,10 @@ def test_l1437s_switch_happens_at_the_push_and_not_without_it(trigger):
     body.close()
 
 
-def test_the_what_if_switch_keeps_every_command_at_its_angle_on_the_switch_tick():
+def test_a_continuous_switch_keeps_every_command_at_its_angle_on_the_switch_tick():
     body = push.body_for(2.1)
-    controller = push.ContinuousSwitchCPG(CPGParams(circuit="humanoid_nao", switch=push.switch_params("time", 2.0)))
+    switch = push.switch_params("time", 2.0, theta0="continuous")
+    controller = CPGController(CPGParams(circuit="humanoid_nao", switch=switch))
     result = push.trial(body, controller, 0, {})
     body.close()
     assert result["switch"] == pytest.approx(2.0)

@@ -20,8 +20,10 @@ NAO V4.0's table, not scaled to 4.3 kg) on the flat; the body's push (``push_for
   the thesis (§0.8); set to 1.25 x the largest such rate over unpushed walks of the same seeds up to the latest push
   time + ``--after`` (measured by the script first and printed), so that walking alone never fires it;
 - ``switch (at push)``: the same switch at the push's start (trigger ``time``): what a perfect detector would do;
-- ``what-if: continuous switch``: both switches again, with the switched joints' theta_0 set so that no command
-  jumps at the switch (``ContinuousSwitchCPG``, emulating a change of ``modules/cpg`` that is not made here).
+- ``continuous switch``: both switches again with the switch's ``theta0: continuous`` (chosen here, not in the
+  thesis): the switched joints' theta_0 := angle - G (MN_E - MN_F) at the switch's tick, so that no command jumps
+  away from its joint's angle (theta_0 := angle makes the knee commands jump 0.7-1.1 rad: the circuit's reflexes
+  command an offset at rest, knees -0.5 rad in humanoid_nao.yaml).
 
 The switch, on all 12 joints (the patterns of L1437, ``patterns.PATTERN_POINTS``): V = q = 0, theta_0 := the measured
 angle, a kick of +-1 for 0.2 s (§7.11) whose sign is the direction (L1437; + = into RG-F: toward flexion, as every
@@ -83,28 +85,6 @@ KICKS = {
 }
 
 
-class ContinuousSwitchCPG(CPGController):
-    """A what-if, not the shipped network: the CPG controller, but on the tick of a pattern switch each switched joint's
-    theta_0 is moved so that its command equals its measured angle (theta_0 := angle - G (MN_E - MN_F) at that tick)
-    instead of theta_0 := angle (§7.11, ``CPGNetwork.switch_pattern``). The humanoid circuit's reflexes command an
-    offset at rest (knees -0.5 rad, humanoid_nao.yaml), so theta_0 := angle makes the knee commands jump 0.7-1.1 rad
-    at the switch; this variant tests whether a switch without that jump would keep the robot up. A change of
-    ``modules/cpg`` would do this inside ``switch_pattern``; here it is done from outside, on the network's arrays."""
-
-    def step(self, sensors: np.ndarray) -> np.ndarray:
-        network = self.network
-        before = len(network.switch_events)
-        command = super().step(sensors)
-        if len(network.switch_events) > before:
-            circuit = network.circuit
-            for name in network.switch_events[-1].patterns:
-                j = circuit.joint_index(name)
-                angle = sensors[circuit.inputs.index(circuit.joints[j].angle_input)]
-                network.theta0[:, j] += angle - command[j]
-            command = network.command()
-        return command
-
-
 def coupled_pairs() -> list[list[str]]:
     """Every joint pair the circuit's RG-RG couplings connect (the switch silences them all)."""
     pairs = []
@@ -115,9 +95,11 @@ def coupled_pairs() -> list[list[str]]:
     return pairs
 
 
-def switch_params(trigger: str, at: float = 0.0, push_rate: float = 1.0, kicks: dict | None = None) -> dict:
+def switch_params(
+    trigger: str, at: float = 0.0, push_rate: float = 1.0, kicks: dict | None = None, theta0: str = "angle"
+) -> dict:
     """The controller's ``switch`` parameter of L1437's reaction (``trigger`` "time" at ``at`` or "push"); ``kicks``
-    replaces some joints' kicks (directions) of ``KICKS``."""
+    replaces some joints' kicks (directions) of ``KICKS``; ``theta0`` "angle" (§7.11) or "continuous"."""
     return {
         "trigger": trigger,
         "at": at,
@@ -126,6 +108,7 @@ def switch_params(trigger: str, at: float = 0.0, push_rate: float = 1.0, kicks: 
         "joints": {name: PATTERNS[name[:-2]] for name in KICKS},
         "joint_kicks": {**KICKS, **(kicks or {})},
         "inhibit": coupled_pairs(),
+        "theta0": theta0,
     }
 
 
@@ -222,9 +205,11 @@ def main() -> None:
         "switch (at push)": lambda at: CPGController(
             CPGParams(circuit="humanoid_nao", switch=switch_params("time", at, kicks=kicks))
         ),
-        "what-if: continuous switch (detector)": lambda at: ContinuousSwitchCPG(detector),
-        "what-if: continuous switch (at push)": lambda at: ContinuousSwitchCPG(
-            CPGParams(circuit="humanoid_nao", switch=switch_params("time", at, kicks=kicks))
+        "continuous switch (detector)": lambda at: CPGController(
+            CPGParams(circuit="humanoid_nao", switch=switch_params("push", 0.0, push_rate, kicks, "continuous"))
+        ),
+        "continuous switch (at push)": lambda at: CPGController(
+            CPGParams(circuit="humanoid_nao", switch=switch_params("time", at, kicks=kicks, theta0="continuous"))
         ),
     }
     rows = {}

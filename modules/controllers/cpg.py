@@ -88,6 +88,11 @@ class PatternSwitch(ModuleParams):
     kick_duration: float = Field(0.2, gt=0, description="s, §7.11")
     joint_kicks: dict[str, float] = Field({}, description="a switched joint's own kick; its sign = direction (L1437)")
     inhibit: list[tuple[str, str]] = Field([], description="joint pairs whose RG-RG couplings are silenced (L1311)")
+    theta0: Literal["angle", "continuous"] = Field(
+        "angle",
+        description="a position-commanded joint's theta_0 at the switch: the measured angle (§7.11), or continuous "
+        "(chosen here): the command stays at the measured angle, no jump by the reflexes' offset",
+    )
 
     def circuit_entry(self) -> dict:
         """This switch as an entry of a circuit's ``switches`` (modules/cpg/circuit.py ``Switch``)."""
@@ -107,6 +112,7 @@ class PatternSwitch(ModuleParams):
             "kick_duration": self.kick_duration,
             "joint_kicks": dict(self.joint_kicks),
             "inhibit": [list(pair) for pair in self.inhibit],
+            "theta0": self.theta0,
         }
 
 

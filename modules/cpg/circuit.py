@@ -145,7 +145,8 @@ class PhaseReset(Strict):
 
 class Switch(Strict):
     """Pattern switching (digest §7.11): new (sigma_s, sigma_f) for the named joints, V = q = 0, theta_0 := the
-    measured angle, then a kick of ``kick`` (into RG-F; RG-E gets its negative) for ``kick_duration`` s.
+    measured angle (or, with ``theta0: continuous``, the value that keeps the command at that angle), then a kick
+    of ``kick`` (into RG-F; RG-E gets its negative) for ``kick_duration`` s.
 
     Triggered once: at time ``at`` (s), or when the input ``input`` exceeds ``above`` (a level), or when its rate of
     change exceeds ``rate_above`` (per s; the push detector of §7.11, e.g. the torso's pitch rate). ``joint_kicks``
@@ -164,6 +165,10 @@ class Switch(Strict):
     kick_duration: Positive = 0.2  # s, §7.11 / §5 (the author's later scripts)
     joint_kicks: dict[Name, Number] = {}
     inhibit: list[Annotated[list[Name], Field(min_length=2, max_length=2)]] = []
+    # "angle": theta_0 := the measured angle (§7.11, the author's method). "continuous": chosen here, not in the thesis:
+    # theta_0 := angle - G (MN_E - MN_F) at the end of the switch's tick, so the command equals the measured angle and
+    # does not jump by the offset the joint's reflexes held (E4.7, docs/results/chapter4/humanoid.md)
+    theta0: Literal["angle", "continuous"] = "angle"
 
 
 class Circuit(Strict):

@@ -339,6 +339,7 @@ class CPGNetwork:
         self._previous_above = None  # which phase-reset sensors were at or above threshold last tick
         self._previous_phi = None
         self._switched = np.zeros((b, len(self.circuit.switches)), dtype=bool)
+        self._hold_at_switch: list[tuple[np.ndarray, int, np.ndarray]] = []  # (copies, joint, angle): continuous
         self._pending_switches = list(range(len(self.circuit.switches)))
         #: the pattern switches so far (§7.11), in order
         self.switch_events: list[SwitchEvent] = []
@@ -452,6 +453,8 @@ class CPGNetwork:
             self._pulse_remaining -= control_dt
             self._pulsing = bool(np.any(self._pulse_remaining > 1e-9))
         self._outputs(rho)
+        if self._hold_at_switch:
+            self._hold_commands()
         return self._per_joint(self._mn)
 
     def _outputs(self, rho: np.ndarray) -> None:
@@ -505,6 +508,15 @@ class CPGNetwork:
             self._pulse_remaining[copy, joint[n]] = duration[n]
             self._pulsing = True
 
+    def _hold_commands(self) -> None:
+        """A continuous switch's last part: theta_0 := angle - G (MN_E - MN_F) with this tick's MN, so that the command
+        equals the angle measured at the switch."""
+        mn = self._mn
+        for mask, j, angle in self._hold_at_switch:
+            drive = self.gain[j] * (mn[mask, 2 * j + E] - mn[mask, 2 * j + F])
+            self.theta0[mask, j] = angle - drive
+        self._hold_at_switch.clear()
+
     def _switches(self, phi: np.ndarray, control_dt: float) -> None:
         """The circuit's pattern switches (§7.11) whose trigger fires this tick: time ``at``, input level ``above``, or
         input rate ``rate_above`` (the change since the last tick over ``control_dt``; none on the first tick)."""
@@ -524,7 +536,13 @@ class CPGNetwork:
                 patterns = {name: (rg.sigma_s, rg.sigma_f) for name, rg in s.joints.items()}
                 kicks = {name: s.joint_kicks.get(name, s.kick) for name in s.joints}
                 self.switch_pattern(
-                    patterns, kick=kicks, duration=s.kick_duration, sensors=phi, where=due, inhibit=s.inhibit
+                    patterns,
+                    kick=kicks,
+                    duration=s.kick_duration,
+                    sensors=phi,
+                    where=due,
+                    inhibit=s.inhibit,
+                    continuous=s.theta0 == "continuous",
                 )
                 if self._switched[:, n].all():
                     self._pending_switches.remove(n)
@@ -538,13 +556,16 @@ class CPGNetwork:
         sensors=None,
         where=None,
         inhibit=(),
+        continuous: bool = False,
     ) -> None:
         """§7.11 (the author's later method, digest §5): set each named joint's (sigma_s, sigma_f), reset its
         V = q = 0, set theta_0 := its measured angle (position command, if the joint names ``angle_input``
         and ``sensors`` are given), and inject +kick into RG-F / -kick into RG-E for ``duration`` s; ``kick`` is one
         number or one per joint (its sign the direction of that joint's switch, L1437). ``inhibit``: joint pairs
         whose couplings are silenced (L1311; all copies, so ``where`` must then select all or none).
-        ``where``: boolean mask of the batch copies to switch (default all). Recorded in ``switch_events``."""
+        ``where``: boolean mask of the batch copies to switch (default all). ``continuous`` (chosen here, not in the
+        thesis): at the end of this tick theta_0 := angle - G (MN_E - MN_F) instead, so the position command equals the
+        measured angle and does not jump by the offset the joint's reflexes held. Recorded in ``switch_events``."""
         mask = np.ones(self.batch, dtype=bool) if where is None else np.asarray(where, dtype=bool)
         kicks = kick if isinstance(kick, dict) else dict.fromkeys(patterns, kick)
         if inhibit and not mask.all():
@@ -564,6 +585,8 @@ class CPGNetwork:
             if sensors is not None and source is not None and self.circuit.command == "position":
                 phi = np.broadcast_to(sensors, (self.batch, len(self.circuit.inputs)))
                 self.theta0[mask, j] = phi[mask, source]
+                if continuous:
+                    self._hold_at_switch.append((mask.copy(), j, phi[mask, source].copy()))
         if inhibit:
             self.inhibit_couplings(inhibit)
         else:
