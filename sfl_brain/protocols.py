@@ -52,6 +52,9 @@ class Progress:
     #: decisions per trial over the recent trials (learn protocol)
     recent_decisions_per_trial: float | None = None
 
+    #: trials before the decisions per trial are extrapolated to the budget (before: only a long no-go run warns)
+    MIN_TRIALS_TO_EXTRAPOLATE = 10
+
     def stall_warning(self) -> str | None:
         """Why the run is likely to stop before its budget at the current no-go ratio, or None."""
         if self.max_decisions is None:
@@ -67,11 +70,17 @@ class Progress:
         per_trial = self.recent_decisions_per_trial
         if per_trial is None and self.trials == 0 and self.decisions >= self.max_decisions // 10:
             return f"stall likely: {self.decisions} decisions and no trial yet (cap {self.max_decisions})"
+        if per_trial is not None and self.trials < self.MIN_TRIALS_TO_EXTRAPOLATE:
+            per_trial = None  # one slow first trial (empty maps, a cautious vigilance) is not a rate
+        if per_trial is not None:
+            # a burst of no-go (a scheduled vigilance passing its cautious end) is not a stall: warn only when the
+            # run's own average rate predicts the cap as well as the recent one
+            per_trial = min(per_trial, self.decisions / self.trials)
         if per_trial is not None and self.decisions + left * per_trial > self.max_decisions:
             reachable = self.trials + int(max(0, self.max_decisions - self.decisions) / per_trial)
             return (
-                f"stall likely: {per_trial:.0f} decisions per trial lately; the cap of {self.max_decisions} "
-                f"decisions stops the run near trial {reachable} of {self.planned}"
+                f"stall likely: {per_trial:.0f} or more decisions per trial, lately and on average; the cap of "
+                f"{self.max_decisions} decisions stops the run near trial {reachable} of {self.planned}"
             )
         return None
 

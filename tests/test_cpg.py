@@ -437,7 +437,6 @@ def test_pattern_switch_sets_the_pattern_resets_the_cell_and_takes_the_measured_
     np.testing.assert_array_equal(network.theta0, theta0)
 
 
-
 def test_a_continuous_switch_keeps_the_command_at_the_measured_angle_where_the_thesis_jumps():
     commands = {}
     for theta0 in ("angle", "continuous"):
@@ -457,6 +456,7 @@ def test_a_continuous_switch_keeps_the_command_at_the_measured_angle_where_the_t
     assert theta0 == 0.9 and abs(after - 0.9) > 0.1  # theta_0 := angle: the reflexes' offset makes the command jump
     before_c, after_c, theta0_c = commands["continuous"]
     assert before_c == before and after_c == pytest.approx(0.9, abs=1e-12) and theta0_c != 0.9
+
 
 # ------------------------------------------------------------------------------------------------
 # Circuit files: checking and overriding

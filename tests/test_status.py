@@ -75,10 +75,19 @@ def test_stall_warning_is_computed_from_the_recent_no_go_ratio():
     p = Progress(planned=100, trials=10, decisions=900, max_decisions=2000, stall_decisions=10_000)
     p.recent_decisions_per_trial = 90.0
     assert p.stall_warning() == (
-        "stall likely: 90 decisions per trial lately; the cap of 2000 decisions stops the run near trial 22 of 100"
+        "stall likely: 90 or more decisions per trial, lately and on average; the cap of 2000 decisions stops the run "
+        "near trial 22 of 100"
     )
     p.recent_decisions_per_trial = 5.0
     assert p.stall_warning() is None
+    burst = Progress(planned=100, trials=50, decisions=1000, max_decisions=20_000, stall_decisions=10_000)
+    burst.recent_decisions_per_trial = 500.0  # 20 x the run's average of 20: a burst, not a stall
+    assert burst.stall_warning() is None
+    burst.decisions = 15_000  # the average (300 per trial) now predicts the cap too
+    assert burst.stall_warning().startswith("stall likely: 300 or more decisions per trial")
+    first = Progress(planned=200, trials=1, decisions=13_751, max_decisions=2_000_000, stall_decisions=100_000)
+    first.recent_decisions_per_trial = 13_751.0  # E4.2 seed 1's first trial: the run then took 45,421 in all
+    assert first.stall_warning() is None
     p.consecutive_nogo = 2500
     assert p.stall_warning().startswith("stall likely: 2500 no-go decisions in a row")
     assert Progress(planned=10, trials=3).stall_warning() is None  # protocols that cannot stall
