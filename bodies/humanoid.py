@@ -74,21 +74,25 @@ from sfl_brain.telemetry import Arrows2D, Boxes3D, Event, rates_of, series
 
 
 def _import_pybullet_quietly():
-    """pybullet prints its build time on standard output when first imported (from C, so
-    ``sys.stdout`` cannot catch it); it would land in ``sfl list`` and ``sfl check`` output."""
+    """pybullet prints its build time when first imported (from C, on standard error in 3.2.7, so ``sys.stderr``
+    cannot catch it); it would land in ``sfl list`` and ``sfl check`` output. Both descriptors are muted for the
+    import only (an import error still raises, with its message)."""
     import sys
 
     if "pybullet" in sys.modules:
         return sys.modules["pybullet"]
     sys.stdout.flush()
-    saved = os.dup(1)
+    sys.stderr.flush()
+    saved = {fd: os.dup(fd) for fd in (1, 2)}
     try:
         with open(os.devnull, "w") as null:
-            os.dup2(null.fileno(), 1)
+            for fd in saved:
+                os.dup2(null.fileno(), fd)
             import pybullet
     finally:
-        os.dup2(saved, 1)
-        os.close(saved)
+        for fd, copy in saved.items():
+            os.dup2(copy, fd)
+            os.close(copy)
     return pybullet
 
 

@@ -12,7 +12,7 @@ mkdir -p "$OUT"
 run() {
   local name=$1; shift
   echo "$name: python $*"
-  python "$@" 2>&1 | grep -v '^pybullet build time' > "$OUT/$name.md"
+  python "$@" > "$OUT/$name.md"
 }
 run gait docs/experiments/humanoid_gait.py --walk 10
 run e4_5_poincare docs/experiments/e4_5_poincare.py --seeds 0 1 2 --noise 0.02 0.08 \
