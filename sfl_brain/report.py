@@ -19,6 +19,7 @@ Only ``completed`` runs enter a mean. A stalled, failed, interrupted or unfinish
 from __future__ import annotations
 
 import json
+from datetime import UTC, datetime
 from pathlib import Path
 
 import matplotlib
@@ -131,6 +132,29 @@ def _vigilance_figure(points: list[tuple[float, float, int]], out: Path, group: 
     return lines
 
 
+def made_by(run_dirs: list[Path]) -> str:
+    """One line saying what made the runs: the source commits (and whether any had uncommitted changes) and the days
+    they started, from each run folder's ``provenance.json`` (its file time for runs made before ``started``)."""
+    commits, days, dirty, unknown = [], [], False, 0
+    for run_dir in run_dirs:
+        path = run_dir / "provenance.json"
+        try:
+            made = json.loads(path.read_text())
+        except (OSError, ValueError):
+            unknown += 1
+            continue
+        commit = (made.get("commit") or "")[:7] or "no git commit"
+        commits += [commit] if commit not in commits else []
+        dirty |= bool(made.get("uncommitted_changes"))
+        started = made.get("started") or datetime.fromtimestamp(path.stat().st_mtime, UTC).isoformat()
+        days += [started[:10]] if started[:10] not in days else []
+    text = (
+        f"Runs made at {', '.join(f'`{c}`' for c in commits) or 'an unknown commit'}"
+        f"{' (some with uncommitted changes)' if dirty else ''}, started {', '.join(sorted(days)) or 'on unknown days'}"
+    )
+    return text + (f"; {unknown} runs have no provenance.json." if unknown else ".")
+
+
 def write_report(run_dirs: list[Path], out: Path) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     groups: dict[str, list[tuple[float, float, int]]] = {}
@@ -197,6 +221,7 @@ def write_report(run_dirs: list[Path], out: Path) -> Path:
             f"{len(unfinished)} of {len(run_dirs)} runs did not complete (status in bold); "
             "they are shown but enter no mean.\n\n"
         )
+    head += made_by(run_dirs) + "\n\n"
     path = out / (f"{stem}.md" if stem else "README.md")
     path.write_text(head + "\n".join(lines + vigilance_lines) + "\n")
     (out / (f"{stem}_summary.json" if stem else "summary.json")).write_text(

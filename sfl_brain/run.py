@@ -28,7 +28,7 @@ import time
 import traceback
 import uuid
 from collections.abc import Callable
-from datetime import datetime
+from datetime import UTC, datetime
 from pathlib import Path
 
 import yaml
@@ -218,6 +218,7 @@ def provenance() -> dict:
         "commit": commit,
         "uncommitted_changes": dirty,
         "source": str(source),
+        "started": datetime.now(UTC).isoformat(timespec="seconds"),
     }
 
 

@@ -78,7 +78,11 @@ def test_learn_run_records_everything_and_matches_in_process(tmp_path):
     report = sfl("report", str(out), "--out", str(tmp_path / "report"))
     assert report.returncode == 0, report.stderr
     assert (tmp_path / "report" / "run.png").stat().st_size > 10_000
-    assert "| run | completed | learn | 0.0 | 60 |" in (tmp_path / "report" / "README.md").read_text()
+    table = (tmp_path / "report" / "README.md").read_text()
+    assert "| run | completed | learn | 0.0 | 60 |" in table
+    made = json.loads((out / "provenance.json").read_text())  # the report says what made the run, and when
+    assert f"Runs made at `{(made['commit'] or 'no git commit')[:7]}`" in table
+    assert f"started {made['started'][:10]}." in table
 
 
 def test_sfl_list_names_every_registered_implementation():
