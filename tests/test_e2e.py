@@ -277,6 +277,37 @@ def test_buslink_times_out_when_no_controller_answers():
         session.close()
 
 
+def test_sessions_run_zenoh_on_one_runtime_thread_unless_the_user_says_otherwise():
+    """bus.RUNTIME: Zenoh's runtimes handed over to one worker (a lockstep tick wakes fewer threads);
+    a ZENOH_RUNTIME of the user's is kept."""
+    script = (
+        "import glob, os, time, zenoh\n"
+        "from sfl_brain import bus\n"
+        "ep = bus.free_endpoint()\n"
+        "a = bus.open_session([ep], [])\n"
+        "b = bus.open_session(['tcp/127.0.0.1:0'], [ep])\n"
+        "pub, sub = a.declare_publisher('t/x'), b.declare_subscriber('t/x', zenoh.handlers.RingChannel(4))\n"
+        "deadline = time.monotonic() + 10\n"
+        "while sub.try_recv() is None and time.monotonic() < deadline:\n"
+        "    pub.put(b'x'); time.sleep(0.05)\n"
+        "names = [open(f).read().strip().rsplit('-', 1)[0] for f in glob.glob('/proc/self/task/*/comm')]\n"
+        "print(os.environ['ZENOH_RUNTIME']); print(sorted(set(names) - {'python'}))\n"
+        "a.close(); b.close()\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "ZENOH_RUNTIME"}
+    done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    runtime, threads = done.stdout.splitlines()
+    assert runtime == bus.RUNTIME and threads == "['tx']"  # no rx, acc, net or app threads
+    mine = "(rx: (worker_threads: 2))"
+    done = subprocess.run(
+        [sys.executable, "-c", script], env=env | {"ZENOH_RUNTIME": mine}, capture_output=True, text=True, timeout=60
+    )
+    assert done.returncode == 0, done.stderr
+    runtime, threads = done.stdout.splitlines()
+    assert runtime == mine and "rx" in threads
+
+
 def test_sfl_study_runs_every_combination_and_plots_success_against_vigilance(tmp_path):
     out = tmp_path / "study"
     done = sfl(
