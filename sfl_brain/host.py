@@ -494,10 +494,11 @@ class Host:
                 if sink is not None:
                     sink.close()
             if rec is not None:
-                from .rrlog import RERUN_FLUSH_TIMEOUT
+                from .rrlog import close_recording
 
-                rec.flush(timeout_sec=RERUN_FLUSH_TIMEOUT)  # a full disk stops rerun's writer: never wait for it
-                rec.disconnect()
+                problem = close_recording(rec)
+                if problem is not None:
+                    log.warning("%s: the Rerun recording did not reach the disk (%s)", self.instance, problem)
             self.session.close()
             self.write_counters()
 

@@ -84,4 +84,6 @@ class ProgressView:
         total = sum(n for counts in dropped.values() for n in counts.values())
         if total:
             say(f"  dropped {total} messages that were not the run's own (by process: logs/*.counters.json)")
-        say(f"  inspect: sfl inspect {run_dir}    view: rerun {run_dir / 'recording.rrd'}")
+        recording = run_dir / "recording.rrd"
+        view = f"rerun {recording}" if recording.exists() else f"rerun {run_dir / 'rerun'}/*.rrd (not merged)"
+        say(f"  inspect: sfl inspect {run_dir}    view: {view}")

@@ -37,6 +37,19 @@ log = logging.getLogger("sfl.rrlog")
 #: stops rerun's writer thread and an unbounded flush would wait for ever)
 RERUN_FLUSH_TIMEOUT = 30.0
 
+
+def close_recording(rec: rr.RecordingStream, timeout: float = RERUN_FLUSH_TIMEOUT) -> RuntimeError | None:
+    """Flush ``rec`` for up to ``timeout`` s, then disconnect it; returns the flush's error instead of raising. When the
+    flush fails (a full disk stops rerun's writer thread), the stream is not disconnected: rerun's ``disconnect``
+    waits for that writer for ever (seen: a run hung in it after its disk filled up). The process exits without it."""
+    try:
+        rec.flush(timeout_sec=timeout)
+    except RuntimeError as exc:
+        return exc
+    rec.disconnect()
+    return None
+
+
 DECISION_SERIES = {
     "d_success": ("d_s", SUCCESS),
     "d_failure": ("d_f", FAILURE),
@@ -289,10 +302,9 @@ class RerunLog:
             ),
         )
 
-    def close(self) -> None:
+    def close(self, timeout: float = RERUN_FLUSH_TIMEOUT) -> None:
+        """Send what is left and close the recording, waiting up to ``timeout`` s for it to reach the disk."""
         self.flush()
-        try:
-            self.rec.flush(timeout_sec=RERUN_FLUSH_TIMEOUT)  # a full disk stops rerun's writer: never wait for it
-        except RuntimeError as exc:
-            self._broke(exc)
-        self.rec.disconnect()
+        problem = close_recording(self.rec, timeout)
+        if problem is not None:
+            self._broke(problem)

@@ -49,7 +49,7 @@ from .events import (
 from .processes import kill_quietly
 from .protocols import PROTOCOLS, Conductor, Progress
 from .records import RecordWriter, read_records, record_to, summarise
-from .rrlog import RerunLog
+from .rrlog import RERUN_FLUSH_TIMEOUT, RerunLog
 from .runtime import Supervisor
 from .scenario import Plan
 from .service import RunError
@@ -362,7 +362,8 @@ def run(
             for step in (
                 lambda: sup.stop(grace=0.0 if stopping["signals"] > 1 else 3.0),
                 writer.close,
-                rr_log.close,
+                # a full disk: rerun's writer has stopped, do not wait the healthy disk's time for it
+                lambda: rr_log.close(timeout=2.0 if exit_code == EXIT_ENVIRONMENT else RERUN_FLUSH_TIMEOUT),
                 lambda: merge_recordings(run_dir),
                 lambda: write_tables(run_dir, plan.raw.get("space", [])),
             ):
