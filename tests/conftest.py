@@ -77,7 +77,10 @@ def poll_until(predicate, what: str, timeout: float = 60.0, proc: subprocess.Pop
     deadline = time.monotonic() + timeout
     while not predicate():
         if proc is not None and proc.poll() is not None:
-            raise AssertionError(f"the process ended (code {proc.returncode}) before {what}")
+            said = ""
+            if proc.stderr is not None and not proc.stderr.closed:
+                said = proc.stderr.read()[-3000:]  # what the run said: the reason a flaky end can be diagnosed
+            raise AssertionError(f"the process ended (code {proc.returncode}) before {what}; its stderr:\n{said}")
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
         time.sleep(0.05)

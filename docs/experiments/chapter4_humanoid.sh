@@ -3,7 +3,7 @@
 # gait over 10 seeds, E4.5 (six 250-s walks, the Poincare map of torso pitch, the cobweb figure), E4.6 (11 deg
 # uphill around the thesis's alpha_MLR, theta_MLR) and E4.7 (a 34 N push at 7 timings, then weaker pushes). Each
 # script's tables go to $OUT/<name>.md (default runs/chapter4/humanoid); the cobweb figure to docs/results/chapter4/.
-# About 7 minutes on 2 quiet cores (gait 20 s, E4.5 80 s, E4.6 150 s, E4.7 2 x 65 s).
+# About 4 minutes on 2 quiet cores (3 min 36 s at 19:16 UTC, 2026-11-23).
 #   bash docs/experiments/chapter4_humanoid.sh
 set -euo pipefail
 cd "$(dirname "$0")/../.."
