@@ -100,6 +100,14 @@ class Body(Module):
         self.worker = "body"
         #: pace the trial to wall-clock time (``sfl run --realtime``)
         self.realtime = False
+        #: True during a trial the scenario records (``record.body_every``): buffer what ``log_trial`` will emit
+        self.logging = False
+
+    @classmethod
+    def check_trial_param(cls, name: str, value: Any) -> None:
+        """Raise ValueError (its message says what is expected) if ``value`` cannot be the trial parameter ``name``;
+        ``sfl check`` calls it for every value a scenario can give (space bounds, conditions), before anything starts.
+        The default accepts anything ``TRIAL_PARAMS`` names."""
 
     # --- the trial hooks ----------------------------------------------------
     def start_trial(self, request: TrialRequest) -> None:
@@ -261,6 +269,12 @@ class Controller(Module):
     NEURONS: ClassVar[tuple[str, ...]] = ()
     #: a logged trial's neuron activities: (rows, ticks, trial_id, t0, dt, every); None when not logging
     _neuron_log = None
+
+    @classmethod
+    def check_trial_param(cls, name: str, value: Any) -> None:
+        """Raise ValueError (its message says what is expected) if ``value`` cannot be the trial parameter ``name``;
+        ``sfl check`` calls it for every value a scenario can give (space bounds, conditions), before anything starts.
+        The default accepts anything ``TRIAL_PARAMS`` names."""
 
     def configure(self, params: dict, seed: int) -> None:
         """Start of a trial: take the learnt parameters, reset the neurons."""

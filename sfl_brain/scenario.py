@@ -949,8 +949,8 @@ def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
                 )
             )
         else:  # values the module can check before a trial (e.g. the walker's terrain profile)
-            check = getattr(cls, "check_trial_param", None)
-            for value in values if callable(check) else ():
+            check = getattr(cls, "check_trial_param", None)  # the bases' default accepts anything
+            for value in values if check is not None else ():
                 try:
                     check(param, value)
                 except Exception as exc:
