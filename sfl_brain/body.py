@@ -267,6 +267,11 @@ class Controller(Module):
     #: names of the neuron activities :meth:`neurons` returns (shown on logged trials, at
     #: ``neurons/<name>``)
     NEURONS: ClassVar[tuple[str, ...]] = ()
+    #: the trial being controlled, as its :class:`ControllerReset` (``trial_id``, ``seed``, ``dt``: s of simulated
+    #: time per control tick, ``t0``: its start on ``sim_time``, ``log``, ``params``); set before :meth:`configure`
+    trial: ControllerReset | None = None
+    #: the tick :meth:`step` is computing (0 first; -1 before the trial's first tick): its time is ``tick * trial.dt``
+    tick: int = -1
     #: a logged trial's neuron activities: (rows, ticks, trial_id, t0, dt, every); None when not logging
     _neuron_log = None
 
@@ -328,11 +333,13 @@ class Controller(Module):
         rates = rates_of(self.telemetry)
         if msg.log and self.NEURONS and self.telemetry is not None and rates.neurons:
             self._neuron_log = ([], [], msg.trial_id, msg.t0, msg.dt, rates.signal_every(msg.dt))
+        self.trial, self.tick = msg, -1
         self.configure(dict(msg.params), msg.seed)
         return Ack()
 
     @on(SensorFrame)
     def on_sensor_frame(self, frame: SensorFrame) -> MotorCommand:
+        self.tick = frame.tick
         read = self._read_index
         values = self.step(frame.values if read is None else frame.values[read])
         neuron_log = self._neuron_log

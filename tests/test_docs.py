@@ -145,3 +145,25 @@ def test_the_scenario_runs_learns_with_successes_and_failures_and_records_the_bo
     successes = sum(r["success"] for r in trials)
     assert rows["/body/picture"] >= 50 and rows["/body/angle"] >= 125 * successes  # 25 per s, 5 s each
     assert rows["/body/trial/events"] == 2 * 50  # each trial's start and end
+
+
+def test_a_controller_knows_its_trial_and_tick_without_overriding_the_reset():
+    body_cls, _ = resolve(BODY, ROOT)
+    controller_cls, _ = resolve(CONTROLLER, ROOT)
+    seen = []
+
+    class Watching(controller_cls):
+        def step(self, sensors):
+            seen.append((self.trial.trial_id, self.trial.seed, self.trial.dt, self.tick))
+            return super().step(sensors)
+
+    controller = Watching()
+    assert controller.trial is None and controller.tick == -1
+    body = body_cls()
+    body.link = InProcessLink(controller)
+    for trial_id, seed in ((4, 11), (5, 12)):
+        gains = {"k_angle": 30.0, "k_spin": 5.0}
+        body.handle(TrialRequest(trial_id=trial_id, seed=seed, body_params={}, controller_params=gains, log=False))
+    first = [s for s in seen if s[0] == 4]
+    assert first[0] == (4, 11, body.params.control_dt, 0) and [s[3] for s in first] == list(range(len(first)))
+    assert seen[len(first)] == (5, 12, body.params.control_dt, 0)  # the next trial starts again at tick 0

@@ -45,8 +45,7 @@ from pydantic import Field, ValidationError, field_validator, model_validator
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from sfl_brain.body import Controller
-from sfl_brain.messages import Ack, ControllerReset
-from sfl_brain.module import ModuleParams, on
+from sfl_brain.module import ModuleParams
 from sfl_brain.modules.cpg import CPGNetwork
 from sfl_brain.modules.cpg.circuit import Circuit, apply_overrides, circuit_path, read_circuit_data, validate_circuit
 from sfl_brain.modules.cpg.patterns import PATTERN_POINTS
@@ -228,7 +227,6 @@ class CPGController(Controller):
         joints = params.pattern_joints or [j.name for j in self.circuit.joints]
         self._pattern_joints = joints
         self._pattern_columns = 2 * np.array([self.circuit.joint_index(n) for n in joints])  # their E cells
-        self._reset_message: ControllerReset | None = None
         self._control_dt = 0.01
         self._event_log: tuple[int, float] | None = None  # (trial, t0) of a logged trial
         super().__init__(params, seed=seed)
@@ -247,11 +245,6 @@ class CPGController(Controller):
         if name in ("sigma_s", "sigma_f") and value < 0:
             raise ValueError(f"{name}: expected a number >= 0 (Table 4.1: [0, 5]); got {value!r}")
 
-    @on(ControllerReset)
-    def on_controller_reset(self, msg: ControllerReset) -> Ack:
-        self._reset_message = msg  # configure (called by the base after the previous trial's flush) reads it
-        return super().on_controller_reset(msg)
-
     def configure(self, params: dict, seed: int) -> None:
         unknown = [k for k in params if k not in TRIAL_PARAMS]
         if unknown:
@@ -260,7 +253,7 @@ class CPGController(Controller):
             raise ValueError(f"CPGController takes trial parameters {list(TRIAL_PARAMS)}; got {unknown}{tail}")
         for name, value in params.items():
             self.check_trial_param(name, value)
-        msg = self._reset_message
+        msg = self.trial  # the base sets it before configure (None when configured by hand, e.g. in a test)
         self._control_dt = msg.dt if msg is not None else 0.01
         log = msg is not None and msg.log and self.telemetry is not None
         self._event_log = (msg.trial_id, msg.t0) if log else None
