@@ -26,8 +26,8 @@ class Signal:
     ``low``, ``high``: for a sensor, the range its value stays in (the conformance check runs a short trial and
     fails a value outside it by more than 1% of the range: physics' joint stops and contacts are soft); for a
     command, the range the body acts on (beyond it, the body's own model decides: a motor saturates, a joint
-    stops at its limit). The runtime does not clip or
-    scale either: the bounds are a contract, checked, and shown by ``sfl list BODY``."""
+    stops at its limit). The runtime does not clip or scale either: the bounds are a contract, checked, and shown
+    by ``sfl list BODY``."""
 
     name: str
     unit: str
