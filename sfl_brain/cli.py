@@ -250,10 +250,12 @@ def _describe(cls, reference: str) -> list[str]:
         if not cls.COMMANDS:
             lines += ["", "takes no commands: it needs no controller"]
     if issubclass(cls, Controller):
+        reads, writes = cls.signals(cls.Params())  # a CPG's depend on its circuit: here the default one's
+        depends = " (with the default parameters)" if (reads, writes) != (cls.READS, cls.WRITES) else ""
         lines += [
             "",
-            f"reads sensors:  {', '.join(cls.READS) or '(none)'}",
-            f"writes commands: {', '.join(cls.WRITES)}",
+            f"reads sensors{depends}:  {', '.join(reads) or '(none)'}",
+            f"writes commands{depends}: {', '.join(writes) or '(none)'}",
         ]
         if cls.NEURONS:
             lines.append(f"neurons shown on logged trials: {len(cls.NEURONS)} ({', '.join(cls.NEURONS[:4])}, ...)")

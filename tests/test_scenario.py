@@ -265,5 +265,8 @@ def test_sfl_list_prints_a_body_s_signal_table():
     assert "substeps = 10  physics steps per control tick" in done.stdout
     done = sfl("list", "reflex")
     assert "reads sensors:  hip_l, hip_r, knee_l, knee_r, contact_l, contact_r, slope" in done.stdout
+    done = sfl("list", "cpg")  # its signals come from its circuit: the default one's are shown
+    assert "reads sensors (with the default parameters):  hip_l, hip_r, knee_l" in done.stdout
+    assert "writes commands (with the default parameters): v_hip_l, v_hip_r" in done.stdout
     done = sfl("list", "planar_bipd")
     assert done.returncode == 2 and "did you mean `planar_biped`" in done.stderr and "Traceback" not in done.stderr
