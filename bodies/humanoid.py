@@ -38,7 +38,11 @@ soles lie on the ground, the torso upright). Success: the torso's centre of mass
 ``terrain`` (pieces ``length:slope_deg`` from x = 0, e.g. ``"1.0:0,3.0:10"`` for flat then uphill), and a
 push on the torso: ``push_force`` N for ``push_duration`` s from ``push_time`` s, horizontal, toward
 ``push_direction_deg`` (0 = forward, from behind; 90 = toward +y). E4.7's ball (L1430) is its push:
-34 N for 0.1 s from behind at t = 9 s.
+34 N for 0.1 s from behind at t = 9 s. Or a real ball: ``ball_mass`` kg (> 0: there is one) thrown at
+``ball_speed`` m/s at ``ball_time`` s from ``BALL_GAP`` m behind the torso, its centre ``ball_height`` m above
+the torso's centre of mass (aimed so that gravity brings it back to that height on arrival); what it delivers
+is measured (metrics ``ball_impulse`` N s and ``ball_peak_force`` N: the forward component of its contact forces
+on the robot, summed over the ``BALL_WATCH`` s after the throw).
 
 **Speed.** One PyBullet client per body (DIRECT, no GUI). A world is built once per terrain and saved;
 the next trial on that terrain restores it (``restoreState``), which gives the same trial bit for bit
@@ -233,7 +237,14 @@ PUSH_RANGES = {
     "push_time": (0.0, 600.0),  # s
     "push_duration": (0.0, 10.0),  # s
     "push_direction_deg": (-180.0, 180.0),  # deg, 0 = forward
+    "ball_mass": (0.0, 10.0),  # kg (0: no ball)
+    "ball_speed": (0.0, 30.0),  # m/s, forward
+    "ball_time": (0.0, 600.0),  # s: when it is thrown
+    "ball_height": (-0.3, 0.3),  # m: its centre above the torso's centre of mass
 }
+BALL_RADIUS = 0.05  # m: chosen here (the thesis gives the ball's force, not the ball)
+BALL_GAP = 0.15  # m: from the ball's centre to the torso's centre of mass when thrown (it arrives in about gap / speed)
+BALL_WATCH = 0.2  # s after the throw during which its contacts with the robot are summed (the hit, not a ball at rest)
 
 
 class HumanoidParams(BodyParams):
@@ -265,8 +276,9 @@ class Humanoid(Body):
     def __init__(self, params: HumanoidParams | None = None, *, seed: int = 0) -> None:
         super().__init__(params, seed=seed)
         self.client: int | None = None  # PyBullet's, made by the first trial
-        self._world_key = None  # the terrain of the world built and saved
+        self._world_key = None  # (terrain, ball or not) of the world built and saved
         self._saved: int | None = None
+        self.ball: int | None = None  # the ball's body, in worlds built for a ball
 
     # ------------------------------------------------------------------ conditions
     @classmethod
@@ -302,11 +314,19 @@ class Humanoid(Body):
         self.push_end = self.push_start + float(body_params.get("push_duration", 0.0))
         direction = math.radians(float(body_params.get("push_direction_deg", 0.0)))
         self.push_vector = self.push_force * np.array([math.cos(direction), math.sin(direction), 0.0])
+        self.ball_mass = float(body_params.get("ball_mass", 0.0))
+        self.ball_speed = float(body_params.get("ball_speed", 0.0))
+        self.ball_time = float(body_params.get("ball_time", 0.0))
+        self.ball_height = float(body_params.get("ball_height", 0.0))
+        self.ball_impulse = self.ball_peak = 0.0
+        self._ball_thrown = False
         pieces = self._pieces(body_params)
         if self.client is None:
             self.client = pb.connect(pb.DIRECT)
-        if pieces != self._world_key:
-            self._build(pieces)
+        # a world with a ball is another world: trials without one keep theirs, bit for bit
+        key = (pieces, self.ball_mass > 0)
+        if key != self._world_key:
+            self._build(pieces, ball=self.ball_mass > 0)
         else:
             # the contact cache is not part of a saved state: lift the robot clear and let collision detection
             # drop its contact points, so that no trial inherits the last one's (then restore the start)
@@ -332,9 +352,12 @@ class Humanoid(Body):
         self._trace = [] if self.logging else None  # (t, sensor values, motor power W)
         self._frames = [] if self.logging else None  # (t, link poses, feet's centre of pressure and force)
         self._pushes = [] if self.logging else None  # (t, torso centre of mass, force) every physics step of a push
+        if self.ball is not None:
+            pb.changeDynamics(self.ball, -1, mass=self.ball_mass, physicsClientId=self.client)
 
-    def _build(self, pieces: tuple[tuple[float, float], ...]) -> None:
-        """A new world: the ground of ``pieces``, the robot standing at x = 0 on it; saved for the next trials."""
+    def _build(self, pieces: tuple[tuple[float, float], ...], ball: bool = False) -> None:
+        """A new world: the ground of ``pieces``, the robot standing at x = 0 on it, and (``ball``) a ball resting on
+        the run-up, off the lane; saved for the next trials."""
         p, c = self.params, self.client
         if self._saved is not None:
             pb.removeState(self._saved, physicsClientId=c)
@@ -360,7 +383,14 @@ class Humanoid(Body):
         self._inertial = (info[3], info[4])
         self._to_link = pb.invertTransform(*self._inertial)
         self._place(pieces[0][1])
-        self._world_key = pieces
+        self.ball = None
+        if ball:
+            shape = pb.createCollisionShape(pb.GEOM_SPHERE, radius=BALL_RADIUS, physicsClientId=c)
+            x = -p.run_up + 2 * BALL_RADIUS  # parked: on the run-up, far behind the robot
+            z = self.ground_height(x) + BALL_RADIUS
+            self.ball = pb.createMultiBody(1.0, shape, -1, (x, 0.0, z), physicsClientId=c)
+            pb.changeDynamics(self.ball, -1, restitution=0.0, lateralFriction=0.5, physicsClientId=c)
+        self._world_key = (pieces, ball)
         self._saved = pb.saveState(physicsClientId=c)
 
     def _build_ground(self, pieces) -> None:
@@ -498,7 +528,11 @@ class Humanoid(Body):
             )
             if self.push_force > 0 and self.push_start <= self.t + k * h < self.push_end:
                 self._push(self.t + k * h)  # an external force lasts one step: applied every step of the push
+            if self.ball_mass > 0 and self.t + k * h >= self.ball_time - 1e-9 and not self._ball_thrown:
+                self._throw()
             pb.stepSimulation(physicsClientId=c)
+            if self._ball_thrown and self.t + k * h < self.ball_time + BALL_WATCH:
+                self._ball_contacts(self.t + (k + 1) * h, h)
             self._read_joints()
             self.energy += float(MOTOR @ self.tau**2) * h  # (5.5)-(5.6)
         self.ticks += 1
@@ -519,6 +553,28 @@ class Humanoid(Body):
         )
         if self._pushes is not None:
             self._pushes.append((t, com, self.push_vector))
+
+    def _throw(self) -> None:
+        """The ball leaves BALL_GAP m behind the torso's centre of mass at ``ball_speed``, aimed to arrive at
+        ``ball_height`` above it (its upward speed cancels gravity's drop over the flight)."""
+        c = self.client
+        com = pb.getBasePositionAndOrientation(self.robot, physicsClientId=c)[0]
+        flight = BALL_GAP / self.ball_speed if self.ball_speed > 0 else 0.0
+        start = (com[0] - BALL_GAP, com[1], com[2] + self.ball_height)
+        pb.resetBasePositionAndOrientation(self.ball, start, (0, 0, 0, 1), physicsClientId=c)
+        pb.resetBaseVelocity(self.ball, (self.ball_speed, 0.0, G * flight / 2), (0, 0, 0), physicsClientId=c)
+        self._ball_thrown = True
+
+    def _ball_contacts(self, t: float, h: float) -> None:
+        """The ball's contact forces on the robot over this physics step: forward impulse and peak, arrows."""
+        contacts = pb.getContactPoints(bodyA=self.ball, bodyB=self.robot, physicsClientId=self.client)
+        if not contacts:
+            return
+        force = sum(np.array(ct[7]) * -ct[9] for ct in contacts)  # on the robot (the normal on B points to A)
+        self.ball_impulse += float(force[0]) * h  # forward: a ball that comes to rest on a foot adds its weight only
+        self.ball_peak = max(self.ball_peak, float(force[0]))
+        if self._pushes is not None:
+            self._pushes.append((t, np.array(contacts[0][6]), force))
 
     def _judge(self) -> None:
         """Fall, lane, finish line (once per control tick)."""
@@ -557,6 +613,8 @@ class Humanoid(Body):
             "left_lane": self.left_lane,
             "timed_out": not (success or self.fell or self.left_lane),
         }
+        if self.ball_mass > 0:
+            metrics |= {"ball_impulse": self.ball_impulse, "ball_peak_force": self.ball_peak}
         return success, eta, metrics
 
     # ------------------------------------------------------------------ telemetry
@@ -612,7 +670,13 @@ class Humanoid(Body):
                     np.array([(row[2][0], row[2][2]) for row in pushes]) / 100.0,  # 1 m per 100 N
                 )
             )
-            what = f"push {self.push_force:g} N for {self.push_end - self.push_start:g} s"
+            if self.ball_mass > 0:
+                what = (
+                    f"ball {self.ball_mass:g} kg at {self.ball_speed:g} m/s: {self.ball_impulse:.2f} N s, "
+                    f"peak {self.ball_peak:.0f} N"
+                )
+            else:
+                what = f"push {self.push_force:g} N for {self.push_end - self.push_start:g} s"
             emit(Event("events", trial_id, t0 + pushes[0][0], what))
 
     def _log_pictures(self, trial_id: int, t0: float) -> None:

@@ -151,6 +151,22 @@ def test_a_push_from_behind_topples_it_forward_and_a_small_one_does_not():
     body.close()
 
 
+def test_a_ball_delivers_the_momentum_it_carries_and_a_world_without_one_is_unchanged():
+    body = body_with(Hold(), duration=2.0)
+    before = run(body, {})
+    gentle = run(body, {"ball_mass": 1.0, "ball_speed": 1.0, "ball_time": 1.0})  # 1 N s
+    # an inelastic hit on a 5.2-kg robot standing on the ground: between m v M / (m + M) and m v, plus the small
+    # rebound of PyBullet's penetration recovery (restitution 0 still separates the bodies): up to 10% more
+    assert 0.8 < gentle.metrics["ball_impulse"] <= 1.1 and not gentle.metrics["fell"]
+    hard = run(body, {"ball_mass": 1.0, "ball_speed": 3.4, "ball_time": 1.0})  # E4.7's 3.4 N s as a ball
+    assert 2.8 < hard.metrics["ball_impulse"] <= 3.4 * 1.1 and hard.metrics["fell"]
+    assert hard.metrics["ball_peak_force"] > 34  # an impact, not 34 N for 0.1 s
+    assert run(body, {}).metrics == before.metrics  # the ball's world is another world: this one is as it was
+    with pytest.raises(ValueError, match=r"ball_mass in \[0, 10\]"):
+        Humanoid.check_trial_param("ball_mass", -1)
+    body.close()
+
+
 @pytest.mark.parametrize("slope", [15.0, -15.0])
 def test_a_15_degree_ramp_builds_and_the_robot_starts_standing_on_it(slope):
     body = body_with(Hold(), duration=2.0)

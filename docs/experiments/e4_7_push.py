@@ -1,7 +1,7 @@
 """E4.7 (L1430-1437): a push on the walking humanoid's back, with and without switching to non-oscillatory patterns.
 
     python docs/experiments/e4_7_push.py [--seeds 3] [--times 8 8.5 9 9.17 9.33 9.5 10] [--forces 34] [--after 5]
-                                         [--kick JOINT=SIGN ...]
+                                         [--kick JOINT=SIGN ...] [--ball KG]
 
 The thesis (Webots, NAO of 4.3 kg): a ball pushes the walking robot from the back in the walking direction, 34 N for
 0.1 s at t = 9 s; the CPG switches from oscillatory to non-oscillatory patterns: both shoulders -> plateau (the arms
@@ -34,6 +34,10 @@ direction"), knees + (flexion: crouch), ankle pitch + (flexion: shins forward, f
 between CPGs is necessary to get different patterns in different joints" (L1292). ``--kick knee_l=-1`` etc. tries
 other directions.
 
+``--ball KG``: each push is a real ball instead (``bodies/humanoid.py``: KG kg thrown from behind at the torso's
+centre of mass with the push's momentum, force x 0.1 s, timed to arrive at the push's time); the trial table gives the
+forward impulse it delivered.
+
 Also run: no push (does the switched posture stand by itself; the detector must not fire). Prints Markdown tables:
 survivals per (condition, push) over the seeds, and each trial's outcome with, at a switch, the largest jump of a
 command away from its joint's angle. About 1-2 min on 2 shared cores.
@@ -50,7 +54,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
-from sfl_brain.bodies.humanoid import JOINT_NAMES, Humanoid  # noqa: E402
+from sfl_brain.bodies.humanoid import BALL_GAP, JOINT_NAMES, Humanoid  # noqa: E402
 from sfl_brain.body import InProcessLink  # noqa: E402
 from sfl_brain.messages import TrialRequest  # noqa: E402
 from sfl_brain.modules.controllers.cpg import CPGController, CPGParams  # noqa: E402
@@ -139,6 +143,7 @@ def trial(body: Humanoid, controller: CPGController, seed: int, push: dict) -> d
         "distance": m["distance"],
         "switch": events[0].time if events else None,
         "jump": None,
+        "impulse": m.get("ball_impulse"),  # a ball's forward impulse on the robot, N s
     }
     if events:
         tick = int(round(events[0].time / body.params.control_dt))  # the first command after the switch
@@ -182,6 +187,9 @@ def main() -> None:
     parser.add_argument("--forces", type=float, nargs="+", default=[FORCE], help="N (L1430: 34)")
     parser.add_argument("--after", type=float, default=5.0, help="s the robot must last after the latest push")
     parser.add_argument("--kick", action="append", default=[], metavar="JOINT=SIGN", help="another direction")
+    parser.add_argument(
+        "--ball", type=float, default=0.0, metavar="KG", help="a ball of this mass instead of each push's force"
+    )
     args = parser.parse_args()
     kicks = {}
     for item in args.kick:
@@ -219,10 +227,14 @@ def main() -> None:
             # no push: "switch (at push)" switches at 9 s anyway (does the switched posture stand by itself)
             controller = make(PUSH_TIME if at is None else at)
             push = {} if at is None else {"push_force": force, "push_duration": PUSH_DURATION, "push_time": at}
+            if at is not None and args.ball > 0:  # the same momentum in a ball, arriving at the push's time
+                speed = force * PUSH_DURATION / args.ball
+                push = {"ball_mass": args.ball, "ball_speed": speed, "ball_time": max(0.0, at - BALL_GAP / speed)}
             rows[name, force, at] = [trial(body, controller, seed, push) for seed in range(args.seeds)]
     body.close()
+    what = f"{PUSH_DURATION:g}-s push" if args.ball <= 0 else f"{args.ball:g}-kg ball carrying each push's impulse"
     print(
-        f"### Survivals of a {PUSH_DURATION:g}-s push from behind over {args.seeds} seeds: alive "
+        f"### Survivals of a {what} from behind over {args.seeds} seeds: alive "
         f"{args.after:g} s after the latest push (trial {duration:g} s; {time.perf_counter() - start:.0f} s wall)\n"
     )
     head = ["no push"] + [f"{force:g} N at {at:g} s" for force, at in pushes[1:]]
@@ -244,6 +256,8 @@ def main() -> None:
             extra = f", switch {r['switch']:.2f} s" if r["switch"] is not None else ""
             if r["jump"] is not None:
                 extra += f", {r['jump'][0]:.2f} {r['jump'][1]} ({r['jump'][2]:.2f})"
+            if r["impulse"] is not None:
+                extra += f", ball {r['impulse']:.2f} N s"
             parts.append(f"{what} (x {r['distance']:.2f} m{extra})")
         label = f"{force:g} N at {at:g} s" if at is not None else "none"
         if at is None and name.endswith("(at push)"):
