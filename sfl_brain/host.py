@@ -288,6 +288,7 @@ def request(
     and return its decoded reply. Replies not signed for this request are ignored."""
     seal = seal or bus.Seal(None)
     nonce, payload = seal.seal_request(key_expr, encode(msg), nonce)
+    sent = time.monotonic()
     replies = session.get(
         key_expr,
         payload=payload,
@@ -305,6 +306,9 @@ def request(
         if text is None:  # Zenoh's own "Timeout", or a stranger's error
             continue
         raise RemoteError(text.decode(errors="replace"))
+    waited = time.monotonic() - sent
+    if waited < timeout - 0.5:  # the query ended early: no queryable answered (a module gone, or none there yet)
+        raise NoReply(f"no reply from {key_expr}: the query ended after {waited:.2f} s with no answer (gone?)")
     raise NoReply(f"no reply from {key_expr} within {timeout:g} s")
 
 

@@ -5,6 +5,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 
 import pandas as pd
 import psutil
@@ -274,6 +275,21 @@ def test_buslink_times_out_when_no_controller_answers():
             link.step(SensorFrame(trial_id=0, tick=0, values=np.zeros(3)))
     finally:
         link.close()
+        session.close()
+
+
+def test_a_request_nobody_answers_says_the_query_ended_not_that_it_waited_out_its_time():
+    """A module gone (killed between two requests) ends the query at once: the error must not read as a time-out."""
+    from sfl_brain.host import NoReply, request
+    from sfl_brain.messages import Rejected
+
+    session = bus.open_session([bus.free_endpoint()], [])
+    try:
+        started = time.monotonic()
+        with pytest.raises(NoReply, match=r"no reply from sfl/gone/vigilance/x: the query ended after 0\.\d\d s"):
+            request(session, "sfl/gone/vigilance/x", Rejected(consecutive=0), 30.0)
+        assert time.monotonic() - started < 5
+    finally:
         session.close()
 
 
