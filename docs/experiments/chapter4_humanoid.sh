@@ -3,7 +3,7 @@
 # gait over 10 seeds, E4.5 (six 250-s walks, the Poincare map of torso pitch, the cobweb figure), E4.6 (11 deg
 # uphill around the thesis's alpha_MLR, theta_MLR) and E4.7 (a 34 N push at 7 timings, weaker pushes, both as balls). Each
 # script's tables go to $OUT/<name>.md (default runs/chapter4/humanoid); the cobweb figure to docs/results/chapter4/.
-# About 6 minutes on 2 quiet cores (3 min 36 s at 19:16 UTC, 2026-11-23, before the two ball runs of about a minute each).
+# About 6 minutes on 2 quiet cores (5 min 25 s at 19:55 UTC, 2026-11-23).
 #   bash docs/experiments/chapter4_humanoid.sh
 set -euo pipefail
 cd "$(dirname "$0")/../.."
