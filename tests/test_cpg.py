@@ -414,16 +414,23 @@ def test_phase_reset_pulses_on_heel_strike_and_can_be_switched_off():
     assert after[True][hip, 1] - after[False][hip, 1] < -0.1  # ... and -1 into RG-F of the left hip
 
 
-def test_pattern_switch_sets_the_pattern_resets_the_cell_and_takes_the_measured_angle():
+def knee_switch_walked_1s(switch: dict):
+    """The humanoid circuit with one pattern switch of the left knee, advanced 1 s (100 ticks) with that knee's
+    angle input held at 0.9 rad and every other input 0: (circuit, network, the knee's index, the sensors)."""
     data = read_circuit_data("humanoid_nao")
-    data["switches"] = [{"joints": {"knee_l": {"sigma_s": 1.0, "sigma_f": 0.25}}, "input": "torso_pitch", "above": 0.3}]
+    data["switches"] = [switch]
     circuit = validate_circuit(data)
     network = CPGNetwork(circuit)
-    knee = circuit.joint_index("knee_l")
     sensors = np.zeros(len(circuit.inputs))
     sensors[circuit.inputs.index("knee_l")] = 0.9
     for _ in range(100):
         network.advance(sensors)
+    return circuit, network, circuit.joint_index("knee_l"), sensors
+
+
+def test_pattern_switch_sets_the_pattern_resets_the_cell_and_takes_the_measured_angle():
+    switch = {"joints": {"knee_l": {"sigma_s": 1.0, "sigma_f": 0.25}}, "input": "torso_pitch", "above": 0.3}
+    circuit, network, knee, sensors = knee_switch_walked_1s(switch)
     assert network.sigma_s[0, 2 * knee] == 5.0
     sensors[circuit.inputs.index("torso_pitch")] = 0.5  # the push detector fires
     network.advance(sensors, control_dt=0.001, substeps=1)
@@ -440,15 +447,8 @@ def test_pattern_switch_sets_the_pattern_resets_the_cell_and_takes_the_measured_
 def test_a_continuous_switch_keeps_the_command_at_the_measured_angle_where_the_thesis_jumps():
     commands = {}
     for theta0 in ("angle", "continuous"):
-        data = read_circuit_data("humanoid_nao")
-        data["switches"] = [{"joints": {"knee_l": {"sigma_s": 5.0, "sigma_f": 17.5}}, "at": 1.0, "theta0": theta0}]
-        circuit = validate_circuit(data)
-        network = CPGNetwork(circuit)
-        knee = circuit.joint_index("knee_l")
-        sensors = np.zeros(len(circuit.inputs))
-        sensors[circuit.inputs.index("knee_l")] = 0.9
-        for _ in range(100):
-            network.advance(sensors)
+        switch = {"joints": {"knee_l": {"sigma_s": 5.0, "sigma_f": 17.5}}, "at": 1.0, "theta0": theta0}
+        _, network, knee, sensors = knee_switch_walked_1s(switch)
         before = network.command()[knee]
         network.advance(sensors)  # the switch's tick
         commands[theta0] = (before, network.command()[knee], network.theta0[0, knee])
