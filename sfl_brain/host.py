@@ -330,44 +330,29 @@ def make_recording(run_id: str, rrd: str | None, viewer: str | None):
 
 
 def make_telemetry(
-    rec, module: Module, record: dict | None, run_dir: Path | None, part: str, live: bool = False
+    rec,
+    module: Module,
+    record: dict | None,
+    run_dir: Path | None,
+    part: str,
+    live: bool = False,
+    trial_seconds: float | None = None,
 ) -> TelemetryTee | None:
     """The telemetry sink of a hosted module: its Rerun columns on ``rec`` under the module's
     entity and, with a run folder, its map snapshots as ``<run_dir>/maps/<part>.parquet`` (merged
     into ``maps.parquet`` at the end of the run); sampled at the rates of the scenario's ``record:``.
-    ``live``: a viewer watches, so series are sent at least every 2 s. None when the run does not
-    record (nothing is computed to be shown)."""
+    ``live``: a viewer watches, so series are sent at least every 2 s. ``trial_seconds``: where each
+    trial starts on ``sim_time`` (``Plan.trial_seconds``). None when the run does not record (nothing is
+    computed to be shown)."""
     if rec is None:
         return None
     from .rerun_sink import RerunTelemetry
     from .tables import MapTable
 
     rates = Rates.from_record(record)
-    seconds = (lambda: trial_seconds(run_dir)) if run_dir is not None else None
     table = MapTable(run_dir / "maps" / f"{part}.parquet", module=module.entity) if run_dir is not None else None
-    rerun = RerunTelemetry(rec, module.entity, rates, seconds, batch_seconds=2.0 if live else None)
+    rerun = RerunTelemetry(rec, module.entity, rates, trial_seconds, batch_seconds=2.0 if live else None)
     return TelemetryTee(rerun, table, rates=rates)
-
-
-def trial_seconds(run_dir: Path | str | None) -> float | None:
-    """Simulated seconds from one trial's start to the next on ``sim_time``: the (longest) ``duration``
-    of the run's bodies, from the run folder's self-contained ``scenario.yaml``; None if there is none."""
-    if run_dir is None:
-        return None
-    path = Path(run_dir) / "scenario.yaml"
-    try:
-        import yaml
-
-        raw = yaml.safe_load(path.read_text())
-        durations = []
-        for spec in (raw.get("modules") or {}).values():
-            cls, _ = resolve(spec["impl"], Path(run_dir))
-            if issubclass(cls, Body):
-                durations.append(cls.Params.model_validate(spec.get("params") or {}).duration)
-        return max(durations) if durations else None
-    except Exception as exc:  # noqa: BLE001 - only the recording's sim_time placement depends on it
-        log.info("no trial length from %s (%s): map snapshots only on the trial timeline", path, exc)
-        return None
 
 
 def attach_sinks(rec, rrd: str | None, viewer: str | None) -> None:
@@ -429,8 +414,9 @@ class Host:
         try:
             rec = make_recording(self.run_id, spec.get("rrd"), spec.get("viewer"))
             live = bool(spec.get("viewer"))
+            seconds = spec.get("trial_seconds")
             self.module.telemetry = make_telemetry(
-                rec, self.module, spec.get("record"), self.run_dir, self.instance, live
+                rec, self.module, spec.get("record"), self.run_dir, self.instance, live, seconds
             )
             sinks.append(self.module.telemetry)
             if isinstance(self.module, Body):
@@ -442,7 +428,7 @@ class Host:
                         colocated["reference"], colocated["params"], colocated["seed"], colocated["spec_name"]
                     )
                     controller.telemetry = make_telemetry(
-                        rec, controller, spec.get("record"), self.run_dir, f"{self.instance}.controller", live
+                        rec, controller, spec.get("record"), self.run_dir, f"{self.instance}.controller", live, seconds
                     )
                     sinks.append(controller.telemetry)
                     self.module.link = InProcessLink(controller)

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import logging
 import time
-from pathlib import Path
 
 import numpy as np
 import rerun as rr
@@ -143,16 +142,14 @@ def blueprint(timeline: str = "trial") -> rrb.Blueprint:
 class RerunLog:
     """The supervisor's own recording stream (same recording id as every module's).
 
-    ``trial_seconds``: simulated seconds between trial starts (the body's ``duration``); by default
-    read from the run folder's ``scenario.yaml`` (``rrd`` lies in ``<run>/rerun/``). None: the
-    supervisor's rows stay off ``sim_time``.
+    ``trial_seconds``: simulated seconds between trial starts (the body's ``duration``,
+    ``Plan.trial_seconds``). None: the supervisor's rows stay off ``sim_time``.
     """
 
     def __init__(
         self, run_id: str, rrd: str | None, viewer: str | None, axes: list[str], trial_seconds: float | None = None
     ) -> None:
         from .host import attach_sinks
-        from .host import trial_seconds as trial_seconds_of
 
         self.rec = rr.RecordingStream("sfl-brain", recording_id=run_id)
         attach_sinks(self.rec, rrd, viewer)
@@ -160,8 +157,6 @@ class RerunLog:
         # user's changes, a layout file opened with the recording)
         self.rec.send_blueprint(blueprint(), make_active=False, make_default=True)
         self.axes = axes
-        if trial_seconds is None and rrd:
-            trial_seconds = trial_seconds_of(Path(rrd).parent.parent)
         self.trial_seconds = trial_seconds
         self._decisions: list[dict] = []
         self._trials: list[dict] = []

@@ -312,6 +312,7 @@ def run(
         str(run_dir / "rerun" / "_supervisor.rrd"),  # also saved when streaming to a viewer
         viewer_url,
         [a.name for a in plan.scenario.space],
+        plan.trial_seconds,
     )
     record_to(events, writer, decisions=plan.scenario.record.decisions)
     events.subscribe(DecisionsMade, lambda e: rr_log.decisions(e.rows))

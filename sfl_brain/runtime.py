@@ -211,6 +211,7 @@ class Supervisor:
             "rrd": str(self.run_dir / "rerun" / f"{inst.name}.rrd") if self.record else None,
             "viewer": self.viewer,
             "record": self.plan.scenario.record.model_dump(mode="json"),  # what and how often to show
+            "trial_seconds": self.plan.trial_seconds,  # where each trial starts on sim_time
             "realtime": self.realtime,
             "tick_timeout": self.plan.scenario.timeouts.tick,
             "spin": self.plan.scenario.lockstep.spin_us * 1e-6,

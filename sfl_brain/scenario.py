@@ -406,6 +406,17 @@ class Plan:
         controller_of = {i.routes[m.MotorCommand.TAG]: i.name for i in self.instances if m.MotorCommand.TAG in i.routes}
         return [name for body in self.bodies for name in (body, controller_of.get(body)) if name]
 
+    @property
+    def trial_seconds(self) -> float | None:
+        """Simulated seconds from one trial's start to the next on ``sim_time``: the (longest) ``duration`` of the
+        run's bodies; None when no body has one."""
+        durations = [
+            i.cls.Params.model_validate(i.params).duration
+            for i in self.instances
+            if "duration" in getattr(i.cls.Params, "model_fields", {}) and i.name in self.bodies
+        ]
+        return max(durations) if durations else None
+
     def to_physical(self, unit: np.ndarray) -> dict[str, dict[str, float]]:
         """Map a unit vector to {'controller': {...}, 'body': {...}} physical parameters."""
         out: dict[str, dict[str, Any]] = {"controller": {}, "body": {}}

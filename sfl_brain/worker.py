@@ -77,6 +77,7 @@ def worker_spec(plan: Plan, run_id: str, name: str, connect: list[str], secret: 
         "rrd": None,
         "viewer": None,
         "tick_timeout": plan.scenario.timeouts.tick,
+        "trial_seconds": plan.trial_seconds,
         "watch_stdin": False,
         "colocated": hosted_spec(ctrl),
         "secret": secret,
