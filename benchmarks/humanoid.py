@@ -1,6 +1,6 @@
 """Wall time of one 10-s trial of the NAO-sized humanoid walking on its CPG, three ways, side by side.
 
-    python benchmarks/humanoid.py [--repeats 5] [--spin-us 200] [--pin never|auto|always] [--quick]
+    python benchmarks/humanoid.py [--repeats 5] [--spin-us 400] [--pin never|auto|always] [--quick]
 
 Each item is one trial of 10 s of simulated time (1000 control ticks of 10 ms, 4000 PyBullet steps at 400 Hz),
 interleaved so that all see the same machine load; medians over ``--repeats``:
@@ -14,7 +14,7 @@ interleaved so that all see the same machine load; medians over ``--repeats``:
 (c) the same trial with controller and body each hosted in its own process by ``sfl_brain.host``, as ``sfl run`` hosts
     them, lockstep over Zenoh (1000 ticks); the trial is a request from this process, timed from request to reply.
     The body waits for each command as ``lockstep.spin_us`` ``--spin-us`` says, the two are placed as
-    ``lockstep.pin_cpus`` ``--pin`` says (defaults as in a scenario).
+    ``lockstep.pin_cpus`` ``--pin`` says (defaults as in ``scenarios/humanoid_walk.yaml``: spin 400 us, not pinned).
 
 Goals (issue 16): (b) >= 20x real time, (c) >= 10x, and the CPG plus the bus cheaper than the physics:
 (c) - (a) < (a). The gait does not reach the 1.5-m line in 10 s (about 13.2 s, docs/results/chapter4/humanoid.md),
@@ -42,6 +42,11 @@ from sfl_brain.host import request  # noqa: E402
 from sfl_brain.messages import SensorFrame, TrialRequest  # noqa: E402
 from sfl_brain.modules.controllers.cpg import CPGController, CPGParams  # noqa: E402
 from sfl_brain.placement import assign, usable_cpus  # noqa: E402
+from sfl_brain.scenario import load  # noqa: E402
+
+#: the body's poll for each command in the humanoid's scenario (us), the benchmark's default
+SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "humanoid_walk.yaml"
+SCENARIO_SPIN_US = load(SCENARIO).scenario.lockstep.spin_us
 
 SECONDS = 10.0  # simulated time of a trial
 BODY_PARAMS = {"duration": SECONDS}
@@ -122,7 +127,9 @@ class Processes:
 def main(argv: list[str] | None = None) -> dict[str, float]:
     parser = argparse.ArgumentParser()
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--spin-us", type=float, default=200.0, help="lockstep.spin_us")
+    parser.add_argument(
+        "--spin-us", type=float, default=SCENARIO_SPIN_US, help="lockstep.spin_us (default: the humanoid scenario's)"
+    )
     parser.add_argument("--pin", choices=["never", "auto", "always"], default="never", help="lockstep.pin_cpus")
     parser.add_argument("--quick", action="store_true", help="2 repeats: a smoke test")
     args = parser.parse_args(argv)
