@@ -21,6 +21,13 @@ def _load_or_exit(scenario: str, overrides: tuple[str, ...] = (), seed: int | No
         sys.exit(EXIT_BAD_INPUT)
 
 
+def exit_process(code: int) -> None:
+    """End the command with ``code``: ``rrlog.exit_process`` (a recording a full disk has stuck is not waited for)."""
+    from .rrlog import exit_process as leave
+
+    leave(code)
+
+
 def _start_or_exit(start):
     """Run ``start()``; a problem found before the run exists ends the command with one line."""
     try:
@@ -125,7 +132,7 @@ def run_command(
             )
         )
     view.report(run_dir, summary)
-    sys.exit(summary["exit_code"])
+    exit_process(summary["exit_code"])
 
 
 @main.command()
@@ -182,7 +189,7 @@ def study(scenario, vary, seeds, overrides, out, quiet) -> None:
             )
         view.report(run_dir, summary)
         if summary["status"] == RunStatus.INTERRUPTED:
-            sys.exit(summary["exit_code"])
+            exit_process(summary["exit_code"])
         done.append(run_dir)
         if summary["status"] != RunStatus.COMPLETED:
             unfinished.setdefault(summary["status"], []).append(name)
@@ -196,7 +203,8 @@ def study(scenario, vary, seeds, overrides, out, quiet) -> None:
         )
     for status in (RunStatus.FAILED, RunStatus.STALLED):
         if status in unfinished:
-            sys.exit(EXIT_CODES[status])
+            exit_process(EXIT_CODES[status])
+    exit_process(0)
 
 
 @main.command("list")

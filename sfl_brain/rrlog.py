@@ -21,6 +21,8 @@ shows a trial's walker beside the decision that chose it and the maps that decid
 from __future__ import annotations
 
 import logging
+import os
+import sys
 import time
 
 import numpy as np
@@ -37,16 +39,34 @@ log = logging.getLogger("sfl.rrlog")
 RERUN_FLUSH_TIMEOUT = 30.0
 
 
+#: recordings whose writer a full disk has stuck: kept alive so that no garbage collection drops them (rerun's
+#: ``disconnect`` and a dropped stream both wait for that writer for ever); a process holding any leaves with
+#: :func:`exit_process`
+STUCK: list[rr.RecordingStream] = []
+
+
 def close_recording(rec: rr.RecordingStream, timeout: float = RERUN_FLUSH_TIMEOUT) -> RuntimeError | None:
     """Flush ``rec`` for up to ``timeout`` s, then disconnect it; returns the flush's error instead of raising. When the
-    flush fails (a full disk stops rerun's writer thread), the stream is not disconnected: rerun's ``disconnect``
-    waits for that writer for ever (seen: a run hung in it after its disk filled up). The process exits without it."""
+    flush fails (a full disk stops rerun's writer thread), the stream is neither disconnected nor dropped (seen: a run
+    hung in ``disconnect``, and in the stream's ``__del__``, after its disk filled up): it is kept in ``STUCK``."""
     try:
         rec.flush(timeout_sec=timeout)
     except RuntimeError as exc:
+        STUCK.append(rec)
         return exc
     rec.disconnect()
     return None
+
+
+def exit_process(code: int) -> None:
+    """``sys.exit(code)``, or, when a recording is stuck (``STUCK``), leave at once without the interpreter's clean-up
+    (which would drop the stream and wait for its writer for ever); everything else is written and closed by then."""
+    if STUCK:
+        logging.shutdown()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    sys.exit(code)
 
 
 DECISION_SERIES = {
