@@ -71,7 +71,7 @@ from sfl_brain.bodies.humanoid_table import (
     motor_coefficient,
 )
 from sfl_brain.bodies.planar_biped import TERRAIN_SYNTAX, parse_terrain
-from sfl_brain.body import Body, BodyParams
+from sfl_brain.body import Body, BodyParams, check_number, walking_efficiency
 from sfl_brain.messages import TrialRequest
 from sfl_brain.signals import Signal
 from sfl_brain.telemetry import Arrows2D, Boxes3D, Event, rates_of, series
@@ -226,12 +226,6 @@ def _slope(value, where: str = "") -> float:
     return float(value)
 
 
-def _number(name: str, value, low: float, high: float) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not low <= value <= high:
-        raise ValueError(f"expected {name} in [{low:g}, {high:g}]; got {value!r}")
-    return float(value)
-
-
 PUSH_RANGES = {
     "push_force": (0.0, MAX_PUSH),  # N
     "push_time": (0.0, 600.0),  # s
@@ -290,7 +284,7 @@ class Humanoid(Body):
             for k, (_, slope) in enumerate(parse_terrain(value)):
                 _slope(slope, f"piece {k} of terrain {value!r}")
         elif name in PUSH_RANGES:
-            _number(name, value, *PUSH_RANGES[name])
+            check_number(name, value, *PUSH_RANGES[name])
 
     def _pieces(self, body_params: dict) -> tuple[tuple[float, float], ...]:
         """(length m, slope rad) pieces of the ground from x = 0."""
@@ -599,9 +593,7 @@ class Humanoid(Body):
         distance = float(self.torso_position[0])
         success = self.finished
         # (5.7)-(5.8): E_k = m v_a^2 / 2 with v_a = trajectory length / time; eta = E_k / E_e
-        eta = 0.0
-        if success and self.energy > 0:
-            eta = 0.5 * TOTAL_MASS * (p.finish_line / self.finish_time) ** 2 / self.energy
+        eta = walking_efficiency(TOTAL_MASS, p.finish_line / self.finish_time, self.energy) if success else 0.0
         metrics = {
             "distance": distance,
             "lateral": float(self.torso_position[1]),

@@ -83,7 +83,7 @@ import pymunk.batch
 from pydantic import Field
 
 from sfl_brain.bodies.planar_biped import parse_terrain
-from sfl_brain.body import Body, BodyParams
+from sfl_brain.body import Body, BodyParams, check_number, walking_efficiency
 from sfl_brain.messages import TrialRequest
 from sfl_brain.signals import Signal
 from sfl_brain.telemetry import Arrows2D, Event, Strips2D, rates_of, series
@@ -206,15 +206,6 @@ _AF = pymunk.batch.ArbiterFields
 _ARBITER_FIELDS = _AF.BODY_A_ID | _AF.BODY_B_ID | _AF.TOTAL_IMPULSE | _AF.NORMAL | _AF.POINT_A_1 | _AF.POINT_B_1
 
 
-def _number(name: str, value, low: float, high: float) -> float:
-    """``value`` as a float within [low, high]; ValueError naming ``name`` otherwise."""
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ValueError(f"{name}: expected a number; got {value!r}")
-    if not math.isfinite(value) or not low <= value <= high:
-        raise ValueError(f"{name}: expected a number in [{low:g}, {high:g}]; got {value!r}")
-    return float(value)
-
-
 TRIAL_LIMITS = {  # name: (low, high) of each numeric trial parameter
     "slope_deg": (-MAX_SLOPE_DEG, MAX_SLOPE_DEG),
     "push_force": (-1000.0, 1000.0),  # N
@@ -264,9 +255,9 @@ class PlanarWalker8(Body):
         """Raise ValueError if ``value`` cannot be trial parameter ``name`` (``sfl check`` calls this)."""
         if name == "terrain":
             for k, (_, slope) in enumerate(parse_terrain(value)):
-                _number(f"terrain {value!r} piece {k} slope", slope, -MAX_SLOPE_DEG, MAX_SLOPE_DEG)
+                check_number(f"terrain {value!r} piece {k} slope", slope, -MAX_SLOPE_DEG, MAX_SLOPE_DEG)
         elif name in TRIAL_LIMITS:
-            _number(name, value, *TRIAL_LIMITS[name])
+            check_number(name, value, *TRIAL_LIMITS[name])
 
     # ------------------------------------------------------------------ world
     def start_trial(self, request: TrialRequest) -> None:
@@ -573,7 +564,7 @@ class PlanarWalker8(Body):
         velocity = distance / self.t if self.t > 0 else 0.0
         success = (not self.fell) and self.steps >= self.params.min_steps  # E4.2, L1243
         # walking efficiency (5.7)-(5.8): kinetic energy at the mean speed over the electrical energy
-        quality = 0.5 * MASS * velocity**2 / self.energy if success and self.energy > 0 else 0.0
+        quality = walking_efficiency(MASS, velocity, self.energy) if success else 0.0
         metrics = {
             "distance": distance,
             "velocity": velocity,

@@ -35,7 +35,7 @@ import pymunk
 import pymunk.batch
 from pydantic import Field
 
-from sfl_brain.body import Body, BodyParams
+from sfl_brain.body import Body, BodyParams, walking_efficiency
 from sfl_brain.messages import TrialRequest
 from sfl_brain.signals import Signal
 from sfl_brain.telemetry import Strips2D, rates_of, series
@@ -377,7 +377,7 @@ class PlanarBiped(Body):
         success = (not self.fell) and distance >= p.min_distance and self.steps >= p.min_steps
         mass = M_TRUNK + 2 * (M_THIGH + M_SHANK)
         # walking efficiency (5.7)-(5.8): kinetic energy at the average speed over the energy spent
-        quality = 0.5 * mass * velocity**2 / self.energy if success and self.energy > 0 else 0.0
+        quality = walking_efficiency(mass, velocity, self.energy) if success else 0.0
         metrics = {
             "distance": distance,
             "velocity": velocity,

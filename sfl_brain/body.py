@@ -42,6 +42,21 @@ from .signals import Signal, WiringError, names, wiring
 from .telemetry import FAILURE, SUCCESS, Event, rates_of, series
 
 
+def check_number(name: str, value: Any, low: float, high: float) -> float:
+    """``value`` as a float within [low, high]; ValueError naming ``name`` otherwise (for ``check_trial_param``)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ValueError(f"{name}: expected a number; got {value!r}")
+    if not math.isfinite(value) or not low <= value <= high:
+        raise ValueError(f"{name}: expected a number in [{low:g}, {high:g}]; got {value!r}")
+    return float(value)
+
+
+def walking_efficiency(mass: float, speed: float, energy: float) -> float:
+    """(5.7)-(5.8): the kinetic energy at the mean speed, m v^2 / 2 (kg, m/s), over the energy spent (J); 0 when
+    nothing was spent."""
+    return 0.5 * mass * speed**2 / energy if energy > 0 else 0.0
+
+
 class ControllerLink(Protocol):
     """How a body reaches its controller during a trial."""
 

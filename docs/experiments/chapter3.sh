@@ -7,13 +7,7 @@ cd "$(dirname "$0")/../.."
 OUT=${OUT:-runs/chapter3}
 mkdir -p "$OUT"
 
-# run once: a run folder whose summary says "completed" is kept (re-running the script resumes)
-once() {
-  local dir=$1; shift
-  if grep -qs '"status": "completed"' "$dir/summary.json"; then echo "kept $dir"; return; fi
-  rm -rf "$dir"
-  "$@" --out "$dir" --quiet
-}
+source docs/experiments/_once.sh  # once DIR COMMAND...: a completed run folder is kept
 
 # a study whose high-vigilance runs stall (exit code 3) is still a study: those runs are marked in
 # its report and left out of every mean; any other failure stops the script

@@ -10,13 +10,7 @@ cd "$(dirname "$0")/../.."
 OUT=${OUT:-runs/chapter4}
 mkdir -p "$OUT"
 
-# run once: a run folder whose summary says "completed" is kept (re-running the script resumes)
-once() {
-  local dir=$1; shift
-  if grep -qs '"status": "completed"' "$dir/summary.json"; then echo "kept $dir"; return; fi
-  rm -rf "$dir"
-  "$@" --out "$dir" --quiet
-}
+source docs/experiments/_once.sh  # once DIR COMMAND...: a completed run folder is kept
 
 python docs/experiments/e4_1_patterns.py --out docs/results/chapter4 > /dev/null
 for seed in 0 1 2; do
