@@ -11,6 +11,7 @@ Layout of a file (see ``circuits/*.yaml``; CPG-HUMANOID.md is "the digest" below
     name: ...
     command: voltage | position        # (3.6) V = M (G_E U_E + G_F U_F) with G_E = 1, G_F = -1,
                                        # or theta_0 + G (MN_E - MN_F) (digest §5, §7.8)
+    pf_input: potential | bounded      # the RG output the PF reads (4.10): V, or tanh(V / A_f)
     cell: {tau_m, tau_s, A_f, E_s}     # the Rowat-Selverston constants, (4.1)-(4.8)
     motor_neuron: {alpha, theta}       # (4.11): 5 and 0.5, L1127
     inputs: [names of the raw sensor values, in the order of the array given to advance()]
@@ -177,6 +178,11 @@ class Circuit(Strict):
     name: Name
     description: str = ""
     command: Literal["voltage", "position"]
+    # what the PF reads of its RG (4.10): "potential" = V itself (author's code, digest §5, §7.3: V swings about +-5.5
+    # to +-8, so the PF's threshold range [-0.5, 0.5] of Table 4.1 moves it little), "bounded" = tanh(V / A_f), the
+    # RG's bounded output that already carries the RG-RG synapses (§7.3), of order 1 like the thesis's PF input
+    # (Fig. 4.6: theta_MLR = +-0.5 dominates, L1160)
+    pf_input: Literal["potential", "bounded"] = "potential"
     cell: Cell = Cell()
     motor_neuron: MotorNeuronConstants = MotorNeuronConstants()
     inputs: list[Name] = []

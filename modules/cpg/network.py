@@ -22,7 +22,9 @@ Choices where the thesis is silent (CPG-HUMANOID.md, "the digest", §7), followe
   time on the robot; not reproduced).
 - §7.3: synaptic input to a cell is added to its injected current, i = i_ext + sum_k w_k tanh(V_k / A_f)
   (bounded presynaptic output; raw V at |w| = 1 cancels the leak of (4.4) and diverges). The same
-  tanh output carries the intra-joint RG-E <-> RG-F synapse of Table 4.1 (-1). The PF reads V itself.
+  tanh output carries the intra-joint RG-E <-> RG-F synapse of Table 4.1 (-1). The PF reads V itself
+  (``pf_input: potential``, the author's code) or that bounded output (``pf_input: bounded``, an input of order 1 as
+  the thesis's Fig. 4.6 suggests; issue 23).
 - §7.5: n in (4.10)/(4.12) = the number of sensory synapses declared on that neuron, zero weights
   included.
 - §7.6: theta_MLR enters with opposite signs: theta_eff = theta - theta_MLR on PF-E and theta + theta_MLR
@@ -187,6 +189,7 @@ class CPGNetwork:
         self._pf_divisor, self._mn_divisor = self._n_pf + 1, self._n_mn + 1  # (n + 1) of (4.10), (4.12)
         self._sensor_half_alpha = 0.5 * self._sensor_alpha  # halved for _logistic
         self._w_rg2pf = np.repeat([j.w_rg2pf for j in circuit.joints], 2)
+        self._pf_bounded = circuit.pf_input == "bounded"  # the PF reads tanh(V / A_f), not V (circuit.py)
         self._w_pf2mn = np.repeat([j.w_pf2mn for j in circuit.joints], 2)
 
         self.mn_alpha, self.mn_theta = circuit.motor_neuron.alpha, circuit.motor_neuron.theta
@@ -463,7 +466,10 @@ class CPGNetwork:
         self._sensory = rho
         n = self.n_neurons
         drive = rho @ self._w_sensory  # sum_j w_j S_j of (4.10) in [:, :n], of (4.12) in [:, n:]
-        I_pf = (self._w_rg2pf * self.y[:, 0] + drive[:, :n]) / self._pf_divisor  # (4.10) L1110
+        rg = self.y[:, 0]
+        if self._pf_bounded:  # the RG's bounded output tanh(V / A_f) (circuit ``pf_input: bounded``)
+            rg = np.tanh(rg / self.A_f)
+        I_pf = (self._w_rg2pf * rg + drive[:, :n]) / self._pf_divisor  # (4.10) L1110
         self._pf = _logistic(self._pf_half_slope, I_pf - self._pf_centre)  # (4.9) L1108
         I_mn = (self._w_pf2mn * self._pf + drive[:, n:]) / self._mn_divisor  # (4.12) L1125
         self._mn = _logistic(self._mn_half_slope, I_mn - self.mn_theta)  # (4.11) L1123

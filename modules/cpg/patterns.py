@@ -105,16 +105,17 @@ def classify(
 
 
 def one_joint_circuit(
-    rg_mutual: float = 0.0, pf_alpha: float = 1.0, gain: float = 1.0, w_rg2pf: float = 1.0
+    rg_mutual: float = 0.0, pf_alpha: float = 1.0, gain: float = 1.0, w_rg2pf: float = 1.0, pf_input: str = "potential"
 ) -> Circuit:
     """A single joint, no sensors, position command theta = gain (MN_E - MN_F), kicked at t = 0 with +1 into RG-F
     (-1 into RG-E) for 80 ms (digest §1.7). ``rg_mutual`` = 0 makes E and F two independent mirror cells (the
     digest's single-cell reference); Table 4.1's -1 couples them. ``w_rg2pf`` = 0.2 gives the PF input of an ankle
-    pitch PF (RG / (n + 1) with n = 4 silent sensors, (4.10))."""
+    pitch PF (RG / (n + 1) with n = 4 silent sensors, (4.10)). ``pf_input``: what the PF reads of the RG (circuit.py)."""
     return validate_circuit(
         {
             "name": "one_joint",
             "command": "position",
+            "pf_input": pf_input,
             "joints": [
                 {
                     "name": "joint",
@@ -138,6 +139,7 @@ def simulate_one_joint(
     pf_alpha: float = 1.0,
     theta_mlr=0.0,
     w_rg2pf: float = 1.0,
+    pf_input: str = "potential",
     control_dt: float = 0.01,
     substeps: int = 10,
 ) -> dict[str, np.ndarray]:
@@ -146,7 +148,7 @@ def simulate_one_joint(
     (RG membrane potentials), ``MN_E``, ``MN_F`` and ``angle`` (the position command, rad)."""
     sigma_s, sigma_f = (np.atleast_1d(np.asarray(x, dtype=float)) for x in (sigma_s, sigma_f))
     sigma_s, sigma_f = np.broadcast_arrays(sigma_s, sigma_f)
-    network = CPGNetwork(one_joint_circuit(rg_mutual, pf_alpha, w_rg2pf=w_rg2pf), batch=sigma_s.size)
+    network = CPGNetwork(one_joint_circuit(rg_mutual, pf_alpha, w_rg2pf=w_rg2pf, pf_input=pf_input), batch=sigma_s.size)
     network.set_pattern(sigma_s.reshape(-1, 1), sigma_f.reshape(-1, 1))
     network.set_descending(theta_mlr=np.reshape(theta_mlr, (-1, 1)) if np.ndim(theta_mlr) else theta_mlr)
     ticks = int(round(duration / control_dt))
