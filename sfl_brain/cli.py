@@ -72,7 +72,14 @@ def check(scenario: str, overrides: tuple[str, ...]) -> None:
     """Validate SCENARIO without starting anything (exit 2 on problems)."""
     plan = _load_or_exit(scenario, overrides)
     procs = ", ".join(i.name + (f" (+{i.colocated.name})" if i.colocated else "") for i in plan.instances)
-    click.echo(f"{scenario}: ok — protocol {plan.scenario.protocol.kind}, {plan.dim}-D space, processes: {procs}")
+    proto = plan.scenario.protocol
+    shape = (
+        f"{len(proto.conditions)} conditions x {proto.trials // len(proto.conditions) // proto.repeats} grid points x "
+        f"{proto.repeats} repeats = {proto.trials} trials"
+        if proto.kind == "conditions"
+        else f"{plan.dim}-D space"
+    )
+    click.echo(f"{scenario}: ok — protocol {proto.kind}, {shape}, processes: {procs}")
 
 
 @main.command("run")

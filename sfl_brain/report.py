@@ -30,6 +30,7 @@ import numpy as np  # noqa: E402
 import yaml  # noqa: E402
 
 from .records import read_records, run_status, summarise  # noqa: E402
+from .report_conditions import conditions_section, is_conditions_run  # noqa: E402
 from .report_cpg import cpg_run, is_cpg_run, write_cpg_sections  # noqa: E402
 
 
@@ -162,6 +163,7 @@ def write_report(run_dirs: list[Path], out: Path) -> Path:
     left_out: dict[str, list[str]] = {}
     statuses: dict[str, dict] = {}
     cpg_results: list[dict] = []
+    conditions: dict[str, tuple[dict, list[Path], list[str]]] = {}  # scenario name -> (scenario, completed, left out)
     summaries: dict[str, dict] = {}
     lines = [
         "| run | status | protocol | s_vig | trials | success rate | thesis | figure |",
@@ -179,7 +181,14 @@ def write_report(run_dirs: list[Path], out: Path) -> Path:
         learn = scenario["protocol"]["kind"] == "learn"
         rates = _thesis(scenario["name"]) if learn else {}
         thesis = f"{rates[s_vig]:.0%}" if isinstance(s_vig, int | float) and s_vig in rates else ""
-        if is_cpg_run(scenario):
+        if is_conditions_run(scenario):
+            entry = conditions.setdefault(scenario["name"], (scenario, [], []))
+            if completed:
+                entry[1].append(run_dir)
+            else:
+                entry[2].append(f"{run_dir.name}: {status}, {why}")
+            figure = ""
+        elif is_cpg_run(scenario):
             cpg_results.append(cpg_run(run_dir, out, scenario, status))
             figure = next(iter(cpg_results[-1]["figures"]), "")
         else:
@@ -213,8 +222,12 @@ def write_report(run_dirs: list[Path], out: Path) -> Path:
             vigilance_lines += [f"- {text}" for text in left_out[group]]
     unfinished = [d for d, st in statuses.items() if st["status"] != "completed"]
     vigilance_lines += write_cpg_sections(cpg_results) if cpg_results else []
+    for scenario, completed_runs, skipped in conditions.values():
+        vigilance_lines += [""] + conditions_section(scenario, completed_runs, skipped, out)
     names = sorted({r["scenario"] for r in cpg_results})
     stem = names[0] if len(cpg_results) == len(run_dirs) and len(names) == 1 else None
+    if len(conditions) == 1 and sum(len(c[1]) + len(c[2]) for c in conditions.values()) == len(run_dirs):
+        stem = next(iter(conditions))
     head = f"# Results of {stem} (`sfl report`)\n\n" if stem else "# Results\n\n"
     if unfinished:
         head += (

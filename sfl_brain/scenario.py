@@ -18,6 +18,7 @@ the body can check (terrains), restart policies.
 from __future__ import annotations
 
 import copy
+import inspect
 import json
 import math
 import os
@@ -112,7 +113,94 @@ class ExploitProtocol(Strict):
     trials: int = Field(1, ge=1, le=10_000)
 
 
-Protocol = Annotated[LearnProtocol | SweepProtocol | ExploitProtocol, Field(discriminator="kind")]
+#: a trial parameter's value, as a scenario gives it (a number, a word, a switch)
+TrialValue = float | int | str | bool
+
+
+class ConditionsProtocol(Strict):
+    """A set of trials under named conditions, for experiments that compare conditions rather than learn (E4.3-E4.7,
+    E5.3): every condition runs every point of ``grid`` (trial parameters varied together, every combination),
+    ``repeats`` times, each repeat from its own start (trial seed). Repeat r has the same seed in every condition and
+    at every grid point, so that two conditions are compared on the same starts (paired trials). A condition and a
+    grid key name trial parameters as axes do (``body.push_force``, ``controller.phase_reset``); the scenario's own
+    ``conditions`` apply to every trial first."""
+
+    kind: Literal["conditions"]
+    conditions: dict[str, dict[str, TrialValue]] = Field(
+        min_length=1, max_length=64, description="name -> the trial parameters of that condition ({} = as the scenario)"
+    )
+    grid: dict[str, list[TrialValue]] = Field(
+        {}, max_length=8, description="trial parameter -> the values to run; every combination, in the order given"
+    )
+    repeats: int = Field(1, ge=1, le=10_000, description="starts (trial seeds) per condition and grid point")
+    judge: Literal["success", "upright"] = Field(
+        "success",
+        description="what a trial survived means in the records and reports: the body's success, or upright = the "
+        "body reports no fall (metric `fell`)",
+    )
+    compare: list[Annotated[list[str], Field(min_length=2, max_length=2)]] = Field(
+        [], max_length=64, description="pairs of conditions that sfl report tests against each other (exact tests)"
+    )
+    pool: list[str] = Field(
+        [], max_length=8, description="grid keys sfl report pools over in its summary (e.g. body.push_phase)"
+    )
+    metrics: list[str] = Field(
+        [], max_length=16, description="body metrics sfl report summarises per condition (mean and spread)"
+    )
+
+    @property
+    def trials(self) -> int:
+        """Trials the protocol runs: conditions x grid points x repeats."""
+        return len(self.conditions) * math.prod(len(v) for v in self.grid.values()) * self.repeats
+
+
+def conditions_problems(proto: ConditionsProtocol) -> list[Problem]:
+    """What the schema cannot say about a conditions protocol: names, references between its keys, its size."""
+    out = []
+    for name in proto.conditions:
+        if not re.fullmatch(r"[A-Za-z0-9_.-]{1,64}", name):
+            out.append(Problem(f"protocol.conditions.{name}", "expected a name of letters, digits, _ . - (at most 64)"))
+    for key, values in proto.grid.items():
+        if not values:
+            out.append(Problem(f"protocol.grid.{key}", "expected at least one value; got []"))
+    names = list(proto.conditions)
+    for i, pair in enumerate(proto.compare):
+        for k, name in enumerate(pair):
+            if name not in proto.conditions:
+                out.append(
+                    Problem(
+                        f"protocol.compare.{i}.{k}",
+                        f"expected one of the conditions {names}; got {name!r}",
+                        nearest(name, names),
+                    )
+                )
+        if pair[0] == pair[1]:
+            out.append(Problem(f"protocol.compare.{i}", f"expected two different conditions; got {list(pair)}"))
+    for i, key in enumerate(proto.pool):
+        if key not in proto.grid:
+            out.append(
+                Problem(
+                    f"protocol.pool.{i}",
+                    f"expected a key of the grid {list(proto.grid)}; got {key!r}",
+                    nearest(key, list(proto.grid)),
+                )
+            )
+    if proto.trials > MAX_CONDITION_TRIALS:
+        out.append(
+            Problem(
+                "protocol",
+                f"expected at most {MAX_CONDITION_TRIALS} trials (conditions x grid points x repeats); "
+                f"got {proto.trials}",
+            )
+        )
+    return out
+
+
+#: the most trials a conditions protocol may ask for
+MAX_CONDITION_TRIALS = 1_000_000
+
+
+Protocol = Annotated[LearnProtocol | SweepProtocol | ExploitProtocol | ConditionsProtocol, Field(discriminator="kind")]
 
 
 class Record(Strict):
@@ -170,12 +258,18 @@ class ScenarioModel(Strict):
     description: str = ""
     seed: int = Field(0, ge=0, lt=2**32)
     protocol: Protocol
-    space: list[Axis] = Field(min_length=1, max_length=8)
+    space: list[Axis] = Field([], max_length=8, description="Omega's axes (every protocol but conditions needs one)")
     conditions: dict[str, float | int | str | bool] = {}
     modules: dict[str, ModuleSpec] = Field(min_length=1)
     record: Record = Record()
     timeouts: Timeouts = Timeouts()
     lockstep: Lockstep = Lockstep()
+
+    @model_validator(mode="after")
+    def _space_needed(self):
+        if not self.space and self.protocol.kind != "conditions":
+            raise ValueError(f"space: expected at least one axis for protocol {self.protocol.kind!r}; got none")
+        return self
 
 
 # --------------------------------------------------------------------------------------------
@@ -301,7 +395,7 @@ def _clean_loc(loc: tuple, kind: str) -> tuple:
     for part in loc:
         if isinstance(part, str) and _SCHEMA_PART.match(part):
             continue
-        if len(out) == 1 and out[0] == "protocol" and part in ("learn", "sweep", "exploit"):
+        if len(out) == 1 and out[0] == "protocol" and part in ("learn", "sweep", "exploit", "conditions"):
             continue
         out.append(part)
     if kind in EXPECTED and len(out) > 1 and out[-1] in _UNION_MEMBERS:
@@ -442,10 +536,24 @@ PROTOCOL_NEEDS: dict[str, list[tuple[type[m.Message], str]]] = {
     ],
     "sweep": [(m.TrialRequest, "to run trials on a body")],
     "exploit": [(m.Exploit, "to read the success map"), (m.TrialRequest, "to run trials on a body")],
+    "conditions": [(m.TrialRequest, "to run trials on a body")],
 }
 
 #: which registered implementation provides a message kind, for hints
 HINT_IMPL = {"acc": "acc", "vigilance": "vigilance", "ofc": "ofc", "body": "analytic", "controller": "reflex"}
+
+
+def trial_param_check(cls: type, params: Any = None):
+    """``cls.check_trial_param`` as a function of (name, value); given the module's ``params`` when it takes them (a
+    controller whose trial parameters name its own presets, e.g. the CPG's pattern switches)."""
+    check = getattr(cls, "check_trial_param", None)
+    if check is None or params is None:
+        return check
+    try:
+        takes_params = "params" in inspect.signature(check).parameters
+    except (TypeError, ValueError):
+        takes_params = False
+    return (lambda name, value: check(name, value, params=params)) if takes_params else check
 
 
 def instance_seed(seed: int, name: str) -> int:
@@ -943,6 +1051,16 @@ def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
     }
     targets = [(f"space.{i}.target", a.target, (a.low, a.high)) for i, a in enumerate(scenario.space)]
     targets += [(f"conditions.{k}", k, (v,)) for k, v in scenario.conditions.items()]
+    if kind == "conditions":  # a conditions protocol's trial parameters, as the scenario's own conditions
+        proto = scenario.protocol
+        problems += conditions_problems(proto)
+        for name, values in proto.conditions.items():
+            targets += [(f"protocol.conditions.{name}.{k}", k, (v,)) for k, v in values.items()]
+        targets += [(f"protocol.grid.{k}", k, tuple(v)) for k, v in proto.grid.items()]
+    module_params = {
+        owner: (classes[name][0].Params.model_validate(classes[name][2]) if name else None)
+        for owner, name in (("body", body_name), ("controller", controller_name))
+    }
     for where, target, values in targets:
         owner, dot, param = target.partition(".")
         if not dot or owner not in owners:
@@ -960,7 +1078,7 @@ def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
                 )
             )
         else:  # values the module can check before a trial (e.g. the walker's terrain profile)
-            check = getattr(cls, "check_trial_param", None)  # the bases' default accepts anything
+            check = trial_param_check(cls, module_params[owner])  # the bases' default accepts anything
             for value in values if check is not None else ():
                 try:
                     check(param, value)

@@ -69,6 +69,9 @@ TRIAL_COLUMNS: tuple[Column, ...] = (
     Column("worker", pa.string(), "", "the body worker that ran the trial"),
     Column("wall_ms", _f8, "ms", "wall time of the trial, request to result (not reproducible)"),
     Column("v_unit", pa.list_(_f8), "unit space", "the tried point, one coordinate in [0, 1] per axis"),
+    Column("condition", pa.string(), "", "the named condition the trial ran under (conditions protocol)"),
+    Column("repeat", _i8, "", "which start (trial seed) of its condition and grid point, from 0 (conditions protocol)"),
+    Column("survived", _b, "", "the trial's verdict by protocol.judge: success, or upright (no fall)"),
 )
 
 
@@ -95,18 +98,26 @@ def _schema(base: tuple[Column, ...], rows: list[dict], axes: list[dict]) -> pa.
     for axis in axes:
         if axis["name"] in present:
             fields.append(_field(Column(axis["name"], _f8, axis.get("unit", ""), f"{axis['target']}: physical value")))
+    for name in sorted(k for k in present if k.startswith(("body.", "controller."))):
+        kind = _metric_type(r.get(name) for r in rows)
+        fields.append(_field(Column(name, kind, "", f"trial parameter `{name}` set by the conditions protocol")))
     for name in sorted(k for k in present if k.startswith("m_")):
         fields.append(_field(Column(name, _metric_type(r.get(name) for r in rows), "", f"body metric `{name[2:]}`")))
     return pa.schema(fields)
 
 
 def _metric_type(values) -> pa.DataType:
-    """bool if every value is a bool, int64 if every value is an int, else float64 (nulls aside)."""
+    """bool if every value is a bool, int64 if every value is an int, text if any value is text, a list of float64
+    if every value is a list, else float64 (nulls aside)."""
     seen = [v for v in values if v is not None]
     if seen and all(isinstance(v, bool) for v in seen):
         return _b
     if seen and all(isinstance(v, int) and not isinstance(v, bool) for v in seen):
         return _i8
+    if any(isinstance(v, str) for v in seen):  # text, or a grid of text and numbers: kept as text
+        return pa.string()
+    if seen and all(isinstance(v, list) for v in seen):
+        return pa.list_(_f8)
     return _f8
 
 
@@ -116,6 +127,10 @@ def _table(rows: list[dict], schema: pa.Schema) -> pa.Table:
         values = [r.get(f.name) for r in rows]
         if pa.types.is_floating(f.type):
             values = [None if v is None else float(v) for v in values]
+        elif pa.types.is_string(f.type):
+            values = [None if v is None else str(v) for v in values]
+        elif pa.types.is_list(f.type):
+            values = [None if v is None else [float(x) for x in v] for v in values]
         columns[f.name] = pa.array(values, type=f.type)
     return pa.table(columns, schema=schema)
 
@@ -133,6 +148,8 @@ def write_tables(run_dir: Path, axes: list[dict]) -> list[Path]:
         of_kind = [r for r in rows if r.get("kind") == kind]
         if not of_kind:
             continue
+        if kind == "trial":  # in trial order (workers finish them in any order)
+            of_kind.sort(key=lambda r: r.get("trial", 0))
         schema = _schema(base, of_kind, axes)
         path = run_dir / f"{kind}s.parquet"
         pq.write_table(_table(of_kind, schema), path)

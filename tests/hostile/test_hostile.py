@@ -131,7 +131,7 @@ CASES: dict[str, list[str]] = {
         "lockstep.pin_cpus: expected one of 'never', 'auto' or 'always'; got 'alwys' (did you mean `always`?)"
     ],
     "protocol_typo.yaml": [
-        "protocol.kind: expected one of 'learn', 'sweep', 'exploit'; got 'lern' (did you mean `learn`?)"
+        "protocol.kind: expected one of 'learn', 'sweep', 'exploit', 'conditions'; got 'lern' (did you mean `learn`?)"
     ],
 }
 

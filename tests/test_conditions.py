@@ -1,0 +1,158 @@
+"""The conditions protocol: a set of trials under named conditions, over a grid and repeats (issue 23 item 6), its
+checks, its records and tables, and ``sfl report``'s survival tables with Wilson intervals and exact tests."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pyarrow.parquet as pq
+import pytest
+from rerun.chunk import RrdReader
+
+from sfl_brain import scenario as sc
+from sfl_brain.protocols import condition_cases, repeat_seed
+from sfl_brain.report_conditions import fisher_exact, mcnemar_exact, wilson
+
+from .conftest import SCENARIOS, sfl, sfl_run
+
+BASE = """
+name: cond
+seed: 5
+protocol:
+  kind: conditions
+  conditions:
+    near: {body.x: 0.5}
+    far: {body.x: 0.9}
+  grid:
+    body.y: [0.4, 0.5]
+  repeats: 2
+  compare: [[near, far]]
+modules:
+  body: {impl: analytic}
+"""
+
+
+def test_cases_run_every_condition_point_and_repeat_and_pair_starts_by_repeat():
+    plan = sc.build_plan(sc.yaml.safe_load(BASE.replace("repeats: 2", "repeats: 3")), "cond.yaml", SCENARIOS)
+    proto = plan.scenario.protocol
+    cases = condition_cases(proto)
+    assert proto.trials == len(cases) == 2 * 2 * 3
+    assert [c.condition for c in cases[:6]] == ["near"] * 6 and cases[6].condition == "far"
+    assert [c.point["body.y"] for c in cases[:6]] == [0.4, 0.4, 0.4, 0.5, 0.5, 0.5]
+    assert [c.repeat for c in cases[:3]] == [0, 1, 2]
+    # one start per repeat: the same in both conditions and at every point, different between repeats
+    seeds = {repeat_seed(5, r) for r in range(3)}
+    assert len(seeds) == 3 and repeat_seed(5, 1) != repeat_seed(6, 1)
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (
+            ("compare: [[near, far]]", "compare: [[near, fra]]"),
+            "protocol.compare.0.1: expected one of the conditions ['near', 'far']; got 'fra' (did you mean `far`?)",
+        ),
+        (("  repeats: 2", "  repeats: 2\n  pool: [body.yy]"), "protocol.pool.0: expected a key of the grid ['body.y']"),
+        (
+            ("near: {body.x: 0.5}", "near: {body.xx: 0.5}"),
+            "protocol.conditions.near.body.xx: AnalyticBody takes trial parameters ['x', 'y', 'z']; got 'xx' "
+            "(did you mean `body.x`?)",
+        ),
+        (("body.y: [0.4, 0.5]", "body.y: []"), "protocol.grid.body.y: expected at least one value; got []"),
+        (("compare: [[near, far]]", "compare: [[near, near]]"), "protocol.compare.0: expected two different"),
+        (("repeats: 2", "repeats: 0"), "protocol.repeats: input should be greater than or equal to 1; got 0"),
+        (("  repeats: 2", "  repeats: 2\n  judge: alive"), "protocol.judge: expected one of 'success' or 'upright'"),
+    ],
+)
+def test_a_bad_conditions_protocol_is_refused_before_anything_starts(write_scenario, change, message):
+    path = write_scenario(BASE.replace(*change))
+    done = sfl("check", str(path))
+    assert done.returncode == 2, done.stdout
+    assert message in done.stderr, done.stderr
+    assert "Traceback" not in done.stderr
+
+
+def test_grid_values_are_checked_by_the_body(write_scenario):
+    text = """
+name: pushes
+protocol:
+  kind: conditions
+  conditions: {a: {}}
+  grid: {body.push_force: [10, 5000], body.slope_deg: [0, 30]}
+modules:
+  controller: {impl: cpg}
+  body: {impl: planar_8link}
+"""
+    done = sfl("check", str(write_scenario(text)))
+    assert done.returncode == 2
+    assert "protocol.grid.body.push_force: push_force: expected a number in [-1000, 1000]; got 5000" in done.stderr
+    assert "protocol.grid.body.slope_deg: slope_deg: expected a number in [-15, 15]; got 30" in done.stderr
+
+
+def test_other_protocols_still_need_a_space(write_scenario):
+    text = "name: x\nprotocol: {kind: sweep}\nmodules:\n  body: {impl: analytic}\n"
+    done = sfl("check", str(write_scenario(text)))
+    assert done.returncode == 2
+    assert "space: expected at least one axis for protocol 'sweep'; got none" in done.stderr
+
+
+def test_statistics_match_known_values():
+    low, high = wilson(0, 4)
+    assert low == pytest.approx(0.0, abs=1e-12) and high == pytest.approx(0.4899, abs=1e-3)
+    low, high = wilson(14, 15)
+    assert (low, high) == pytest.approx((0.7018, 0.9881), abs=1e-3)
+    assert all(math.isnan(x) for x in wilson(0, 0))
+    # McNemar exact: 6 pairs where only the first survived, 0 the other way: p = 2 / 2^6
+    p, only_a, only_b = mcnemar_exact([(True, False)] * 6 + [(True, True)] * 5 + [(False, False)] * 3)
+    assert (only_a, only_b) == (6, 0) and p == pytest.approx(2 / 64)
+    assert mcnemar_exact([(True, True), (False, False)])[0] == 1.0
+    # Fisher exact, 14/15 against 10/15 (the old E4.3 counts): not significant
+    assert fisher_exact(14, 15, 10, 15) == pytest.approx(0.1686, abs=1e-3)
+
+
+def test_a_conditions_run_over_processes_records_tables_recording_and_report(tmp_path):
+    out = tmp_path / "run"
+    done = sfl_run(SCENARIOS / "analytic_conditions.yaml", out)
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "completed" and summary["trials"] == summary["planned_trials"] == 18
+    table = pq.read_table(out / "trials.parquet").to_pandas()
+    assert list(table["trial"]) == list(range(18))  # in trial order, whichever worker ran them
+    assert set(table["condition"]) == {"inside", "edge"} and sorted(set(table["repeat"])) == [0, 1, 2]
+    assert table["body.x"].dtype == float and set(table["body.y"]) == {0.3, 0.5, 0.7}
+    # the analytic body's disc: x = 0.5 is inside at every y; x = 0.75 only at y = 0.5
+    inside = table[table["condition"] == "inside"]
+    edge = table[table["condition"] == "edge"]
+    assert inside["survived"].all() and list(edge.groupby("body.y")["survived"].sum()) == [0, 3, 0]
+    assert (table["survived"] == table["success"]).all()  # judge: success
+    assert {w for w in table["worker"]} == {"body.0", "body.1"}
+    rows = {}
+    for chunk in RrdReader(out / "recording.rrd").stream().to_chunks():
+        if not chunk.is_static:
+            rows[str(chunk.entity_path)] = rows.get(str(chunk.entity_path), 0) + chunk.num_rows
+    assert rows["/trials/success"] == 18
+    # the same scenario and seed give the same records
+    again = tmp_path / "again"
+    assert sfl_run(SCENARIOS / "analytic_conditions.yaml", again).returncode == 0
+    keep = ["trial", "condition", "repeat", "body.x", "body.y", "success", "quality", "survived"]
+    second = pq.read_table(again / "trials.parquet").to_pandas()
+    assert table[keep].equals(second[keep])
+
+    report = sfl("report", str(out), str(again), "--out", str(tmp_path / "report"))
+    assert report.returncode == 0, report.stderr
+    page = (tmp_path / "report" / "analytic_conditions.md").read_text()
+    assert "| y | inside | edge | inside vs edge: McNemar p (only inside / only edge) | Fisher p |" in page
+    # pooled over both runs: 6 starts per cell; at y = 0.3 inside 6/6, edge 0/6, McNemar p = 2 / 2^6
+    assert "| 0.3 | 6/6 = 100% [61%, 100%] | 0/6 = 0% [0%, 39%] | 0.031 (6 / 0) | 0.0022 |" in page
+    assert "distance_to_centre: mean (sd)" in page
+    assert (tmp_path / "report" / "analytic_conditions_y.png").stat().st_size > 10_000
+
+
+def test_judge_upright_needs_a_body_that_reports_falls(tmp_path, write_scenario):
+    path = write_scenario(BASE.replace("  repeats: 2", "  repeats: 1\n  judge: upright"))
+    done = sfl_run(path, tmp_path / "run")
+    assert done.returncode == 1, done.stdout
+    assert "protocol.judge is 'upright' but the body reports no metric `fell`" in done.stdout + done.stderr
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert summary["status"] == "failed"
