@@ -285,6 +285,7 @@ class RerunLog:
             ("trials/ns_nf", "ns_nf"),
             ("trials/n_success", "n_success"),
             ("trials/n_failure", "n_failure"),
+            ("trials/survived", "survived"),
             *((f"trials/v/{axis}", axis) for axis in self.axes),
             ("vigilance/s_vig", "s_vig"),
             ("vigilance/band_low", "band_low"),
@@ -307,7 +308,8 @@ class RerunLog:
             self._index(rows),
             rr.TextLog.columns(
                 text=[
-                    f"trial {r['trial']}: {'success' if r['success'] else 'failure'}"
+                    f"trial {r['trial']}{_case(r)}: {'success' if r['success'] else 'failure'}"
+                    + (f" ({'survived' if r['survived'] else 'fell'})" if "survived" in r else "")
                     + (f", eta {r['quality']:.4g}" if r.get("quality") is not None else "")
                     + (f", rho {r['rho']:.3g}" if r.get("rho") is not None else "")
                     for r in rows
@@ -323,3 +325,15 @@ class RerunLog:
         problem = close_recording(self.rec, timeout)
         if problem is not None:
             self._broke(problem)
+
+
+def _case(row: dict) -> str:
+    """A conditions protocol's trial as text: its condition, trial parameters and repeat (empty for other rows)."""
+    if "condition" not in row:
+        return ""
+    params = ", ".join(
+        f"{k.partition('.')[2]} {v:g}" if isinstance(v, float) else f"{k.partition('.')[2]} {v}"
+        for k, v in row.items()
+        if k.startswith(("body.", "controller."))
+    )
+    return f" ({row['condition']}{', ' + params if params else ''}, repeat {row['repeat']})"
