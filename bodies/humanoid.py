@@ -42,7 +42,8 @@ push on the torso: ``push_force`` N for ``push_duration`` s from ``push_time`` s
 ``ball_speed`` m/s at ``ball_time`` s from ``BALL_GAP`` m behind the torso, its centre ``ball_height`` m above
 the torso's centre of mass (aimed so that gravity brings it back to that height on arrival); what it delivers
 is measured (metrics ``ball_impulse`` N s and ``ball_peak_force`` N: the forward component of its contact forces
-on the robot, summed over the ``BALL_WATCH`` s after the throw).
+on the robot, summed over the ``BALL_WATCH`` s after the throw). ``start_noise`` (rad) sets a trial's own start
+perturbation (the parameter's value otherwise).
 
 **Speed.** One PyBullet client per body (DIRECT, no GUI). A world is built once per terrain and saved;
 the next trial on that terrain restores it (``restoreState``), which gives the same trial bit for bit
@@ -236,6 +237,7 @@ PUSH_RANGES = {
     "ball_time": (0.0, 600.0),  # s: when it is thrown
     "ball_height": (-0.3, 0.3),  # m: its centre above the torso's centre of mass
 }
+START_RANGES = {"start_noise": (0.0, 0.2)}  # rad: a trial's own start_noise (the parameter's range)
 BALL_RADIUS = 0.05  # m: chosen here (the thesis gives the ball's force, not the ball)
 BALL_GAP = 0.15  # m: from the ball's centre to the torso's centre of mass when thrown (it arrives in about gap / speed)
 BALL_WATCH = 0.2  # s after the throw during which its contacts with the robot are summed (the hit, not a ball at rest)
@@ -265,7 +267,7 @@ class Humanoid(Body):
     Params = HumanoidParams
     SENSORS = SENSORS
     COMMANDS = COMMANDS
-    TRIAL_PARAMS = ("slope_deg", "terrain", *PUSH_RANGES)
+    TRIAL_PARAMS = ("slope_deg", "terrain", *PUSH_RANGES, *START_RANGES)
 
     def __init__(self, params: HumanoidParams | None = None, *, seed: int = 0) -> None:
         super().__init__(params, seed=seed)
@@ -285,6 +287,8 @@ class Humanoid(Body):
                 _slope(slope, f"piece {k} of terrain {value!r}")
         elif name in PUSH_RANGES:
             check_number(name, value, *PUSH_RANGES[name])
+        elif name in START_RANGES:
+            check_number(name, value, *START_RANGES[name])
 
     def _pieces(self, body_params: dict) -> tuple[tuple[float, float], ...]:
         """(length m, slope rad) pieces of the ground from x = 0."""
@@ -300,7 +304,7 @@ class Humanoid(Body):
     def start_trial(self, request: TrialRequest) -> None:
         p = self.params
         body_params = request.body_params
-        for name in PUSH_RANGES:
+        for name in (*PUSH_RANGES, *START_RANGES):
             if name in body_params:
                 self.check_trial_param(name, body_params[name])
         self.push_force = float(body_params.get("push_force", 0.0))
@@ -327,8 +331,9 @@ class Humanoid(Body):
             pb.resetBasePositionAndOrientation(self.robot, (0.0, 0.0, 100.0), (0, 0, 0, 1), physicsClientId=self.client)
             pb.performCollisionDetection(physicsClientId=self.client)
             pb.restoreState(self._saved, physicsClientId=self.client)
-        if p.start_noise > 0:
-            offsets = np.random.default_rng(request.seed).normal(0.0, p.start_noise, N)
+        start_noise = float(body_params.get("start_noise", p.start_noise))  # a trial may set its own
+        if start_noise > 0:
+            offsets = np.random.default_rng(request.seed).normal(0.0, start_noise, N)
             start = np.clip(self._start_pose + offsets, LOWER, UPPER)
             for i, angle in zip(self.joint_index, start.tolist(), strict=True):
                 pb.resetJointState(self.robot, i, angle, 0.0, physicsClientId=self.client)
@@ -343,7 +348,7 @@ class Humanoid(Body):
         rates = rates_of(self.telemetry)
         self._signal_every = rates.signal_every(p.control_dt)
         self._picture_every = rates.picture_every(p.control_dt)
-        self._trace = [] if self.logging else None  # (t, sensor values, motor power W)
+        self._trace = [] if self.logging else None  # (t, sensor values, motor power W, (x, y, heading))
         self._frames = [] if self.logging else None  # (t, link poses, feet's centre of pressure and force)
         self._pushes = [] if self.logging else None  # (t, torso centre of mass, force) every physics step of a push
         if self.ball is not None:
@@ -536,7 +541,9 @@ class Humanoid(Body):
         if self._trace is not None:
             tick = self.ticks - 1
             if tick % self._signal_every == 0:
-                self._trace.append((self.t, self.sense(), float(MOTOR @ self.tau**2)))
+                forward = self.torso_turn[:, 0]  # the torso's x axis in the world: its heading on the ground
+                where = (*self.torso_position[:2], math.atan2(forward[1], forward[0]))
+                self._trace.append((self.t, self.sense(), float(MOTOR @ self.tau**2), where))
             if tick % self._picture_every == 0:
                 self._record_frame()
 
@@ -631,8 +638,9 @@ class Humanoid(Body):
         self._frames.append((self.t, poses, np.array(forces)))
 
     def log_trial(self, trial_id: int) -> None:
-        """A logged trial on ``sim_time`` (trial k starts at k x duration): joint and torso angles (deg), foot
-        pressures (N) and motor power (W) at ``rates.signals_hz``; every NAO link as a box and the feet's
+        """A logged trial on ``sim_time`` (trial k starts at k x duration): joint and torso angles (deg), the gyro's
+        rates (deg/s), the torso's path on the ground (x, y in m, heading in deg), foot pressures (N) and motor power
+        (W) at ``rates.signals_hz``; every NAO link as a box and the feet's
         contact forces as arrows (side view: x, z) at ``rates.pictures_hz``; the ground's boxes; a push as
         arrows at its every physics step and an event. (The trial's start and end: ``Body.log_outcome``.)"""
         if self.telemetry is None or not self._trace:
@@ -647,6 +655,12 @@ class Humanoid(Body):
         index = {s.name: i for i, s in enumerate(SENSORS)}
         for name in ("torso_pitch", "torso_roll"):
             emit(series(f"torso/{name[6:]}", trial_id, times, np.degrees(values[:, index[name]]), "deg"))
+        for name in ("torso_pitch_rate", "torso_roll_rate"):  # the gyro, about the torso's own axes
+            emit(series(f"torso/{name[6:]}", trial_id, times, np.degrees(values[:, index[name]]), "deg/s"))
+        where = np.array([row[3] for row in self._trace])  # the torso's centre of mass on the ground, its heading
+        emit(series("path/x", trial_id, times, where[:, 0], "m"))
+        emit(series("path/y", trial_id, times, where[:, 1], "m"))
+        emit(series("path/heading", trial_id, times, np.degrees(np.unwrap(where[:, 2])), "deg"))
         for name in ("heel_l", "toe_l", "heel_r", "toe_r"):
             emit(series(f"feet/{name}", trial_id, times, values[:, index[name]], "N"))
         emit(series("power", trial_id, times, power, "W"))

@@ -31,6 +31,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy import stats  # noqa: E402
 
+from . import poincare  # noqa: E402
+from .recorded import read_events, read_series  # noqa: E402
 from .records import read_records  # noqa: E402
 
 CONFIDENCE = 0.95
@@ -222,6 +224,11 @@ def conditions_section(scenario: dict, run_dirs: list[Path], left_out: list[str]
         lines += ["### Body metrics", ""] + metrics + [""]
     for key in ([t.kept[0]] if t.kept else []) + ([t.pool[0]] if t.pool else []):
         lines += [f"![]({t.figure(key, out, name)})", ""]
+    for k, analysis in enumerate(scenario["protocol"].get("analyses") or []):
+        if analysis["kind"] == "poincare":
+            lines += poincare_section(t, run_dirs, out, f"{name}_poincare{k or ''}")
+        elif analysis["kind"] == "trace":
+            lines += trace_section(t, run_dirs, analysis, out, f"{name}_trace{k or ''}")
     if left_out:
         lines += ["Left out (did not complete):", ""] + [f"- {text}" for text in left_out] + [""]
     return lines
@@ -234,3 +241,163 @@ def _seed(run_dir: Path) -> int | str:
         return yaml.safe_load((Path(run_dir) / "scenario.yaml").read_text()).get("seed", "?")
     except (OSError, AttributeError):
         return "?"
+
+
+# ------------------------------------------------------------------------------------------------ from the recording
+def _logged(t: Trials, run_dirs: list[Path], entities: list[str], events: list[str] = ()):
+    """Per run: its rows by trial, the series and events of its logged trials, and where each trial starts on
+    sim_time (its first ``body/trial/events`` event)."""
+    for run in run_dirs:
+        rrd = Path(run) / "recording.rrd"
+        if not rrd.exists():
+            continue
+        rows = {r["trial"]: r for r in t.rows if r["_run"] == str(run)}
+        marks = read_events(rrd, ["body/trial/events", *events])
+        starts = {trial: float(e.times[0]) for trial, e in marks["body/trial/events"].items()}
+        yield run, rows, read_series(rrd, entities), marks, starts
+
+
+def _describe(row: dict, keys: list[str]) -> str:
+    return ", ".join(
+        [row["condition"], *(f"{_label(k)} {_value(row.get(k))}" for k in keys), f"repeat {row['repeat']}"]
+    )
+
+
+def poincare_section(t: Trials, run_dirs: list[Path], out: Path, stem: str) -> list[str]:
+    """E4.5's return maps of the torso pitch on every logged trial (:mod:`sfl_brain.poincare`): a table and the
+    figure (the phase diagram of the first walk, every walk's cobweb, every walk's path)."""
+    names = ["body/torso/pitch", "body/torso/pitch_rate", "body/path/x", "body/path/y"]
+    walks = []
+    for _run, rows, series, _, starts in _logged(t, run_dirs, names):
+        for trial in sorted(series["body/torso/pitch"]):
+            if trial not in rows or trial not in series["body/torso/pitch_rate"]:
+                continue
+            pitch, rate = series["body/torso/pitch"][trial], series["body/torso/pitch_rate"][trial]
+            time = pitch.times - starts.get(trial, pitch.times[0])
+            result = poincare.analyse(time, np.radians(pitch.values), np.radians(rate.values))
+            path = [series[n].get(trial) for n in ("body/path/x", "body/path/y")]
+            walks.append((rows[trial], time, np.radians(pitch.values), np.radians(rate.values), result, path))
+    if not walks:
+        return ["### Poincaré return maps", "", "No logged trial with the torso's pitch and its rate.", ""]
+    sampled = float(np.median(np.diff(walks[0][1])))
+    lines = [
+        "### Poincaré return maps of the torso pitch (E4.5)",
+        "",
+        f"Sigma: pitch rate = 0, + to - (the pitch's maxima), sampled every {sampled * 1000:.0f} ms. Step map r_(n+1) "
+        "against r_n over every crossing; stride maps A, B: every second crossing (one per gait cycle). r* and slope "
+        f"b of the least-squares line; steady: after {poincare.SETTLE:g} s; settled after: returns before the last "
+        "one more than 3 s.d. from the steady mean.",
+        "",
+        "| trial | walk | ended | time s | returns | r_0 | r_1 | r_2 | r_3 | steady mean +- s.d. | settled after | "
+        "step map r*, b | steady r*, b | stride A r*, b | stride B r*, b |",
+        "|" + "---|" * 15,
+    ]
+    for row, time, _, _, res, _ in walks:
+        ended = "fell" if row.get("m_fell") else "left the lane" if row.get("m_left_lane") else "timed out"
+        if row.get("success"):
+            ended = "reached the line"
+        head = f"| {row['trial']} | {_describe(row, list(t.grid))} | {ended} | {time[-1]:.1f} |"
+        if res is None:
+            lines.append(head + " < 3 |" + " - |" * 10)
+            continue
+        r = res["returns"]
+        first = " | ".join(f"{v:.4f}" for v in r[:4]) + " | -" * (4 - min(4, len(r)))
+        maps = (res["map"], res["steady_map"], *res["branches"])
+        cells = [f"{m.fixed_point:.4f}, {m.slope:+.2f} +- {m.slope_error:.2f}" if m else "-" for m in maps]
+        settled = min(res["settled_after"], len(res["times"]) - 1)
+        lines.append(
+            f"{head} {len(r)} | {first} | {res['steady_mean']:.4f} +- {res['steady_sd']:.4f} | "
+            f"{res['settled_after']} ({res['times'][settled]:.1f} s) | {' | '.join(cells)} |"
+        )
+    stable = [res["map"].stable for *_, res, _ in walks if res is not None]
+    lines += ["", f"Step maps stable (|b| < 1): {sum(stable)} of {len(stable)} walks.", ""]
+    lines += [f"![]({_poincare_figure(walks, out, stem)})", ""]
+    return lines
+
+
+def _poincare_figure(walks, out: Path, stem: str) -> str:
+    fig, (phase, web, ground) = plt.subplots(1, 3, figsize=(16, 5.2), gridspec_kw={"width_ratios": [1, 1, 0.8]})
+    colors = plt.cm.tab10.colors
+    row, time, pitch, rate, result, _ = walks[0]
+    phase.plot(pitch, rate, lw=0.3, color="0.6", label="(pitch, pitch rate)")
+    early = time < 5.0
+    phase.plot(pitch[early], rate[early], lw=1.0, color=colors[0], label="first 5 s")
+    if result is not None:
+        phase.plot(result["returns"], np.zeros_like(result["returns"]), "|", color="k", label="section returns r_n")
+    phase.set_xlabel("torso pitch, rad (+ = forward)", fontsize=11)
+    phase.set_ylabel("torso pitch rate, rad/s", fontsize=11)
+    phase.set_title(f"phase diagram, trial {row['trial']}, {time[-1]:.0f} s", fontsize=11)
+    phase.legend(fontsize=8)
+    done = [w for w in walks if w[4] is not None]
+    if done:
+        every = np.concatenate([w[4]["returns"] for w in done])
+        low, high = float(every.min()), float(every.max())
+        margin = 0.05 * (high - low)
+        web.plot([low - margin, high + margin], [low - margin, high + margin], "k--", lw=0.8, label="diagonal")
+        for k, w in enumerate(done):
+            poincare.cobweb(web, w[4]["returns"], w[4]["map"], colors[k % 10], f"trial {w[0]['trial']}")
+    web.set_xlabel("r_n, rad", fontsize=11)
+    web.set_ylabel("r_(n+1), rad", fontsize=11)
+    web.set_title("step map on pitch rate = 0 (+ to -), cobweb of r_0..r_6", fontsize=11)
+    web.legend(fontsize=7)
+    for k, w in enumerate(walks):
+        x, y = w[5]
+        if x is not None and y is not None:
+            ground.plot(x.values, y.values, lw=0.8, color=colors[k % 10], label=f"trial {w[0]['trial']}")
+    ground.set_xlabel("x, m", fontsize=11)
+    ground.set_ylabel("y, m", fontsize=11)
+    ground.set_title("the torso's path (top view)", fontsize=11)
+    ground.legend(fontsize=7)
+    fig.tight_layout()
+    name = f"{stem}.png"
+    fig.savefig(out / name, dpi=100)
+    plt.close(fig)
+    return name
+
+
+def trace_section(t: Trials, run_dirs: list[Path], analysis: dict, out: Path, stem: str) -> list[str]:
+    """The recorded series of the first ``trials`` logged trials of each condition, one panel per series, the
+    events marked as vertical lines (their text in the table below the figure)."""
+    names, event_names = list(analysis["series"]), list(analysis.get("events") or [])
+    picked: dict[str, list] = {c: [] for c in t.conditions}
+    for _, rows, series, marks, starts in _logged(t, run_dirs, names, event_names):
+        for trial in sorted(rows):
+            row = rows[trial]
+            mine = picked.setdefault(row["condition"], [])
+            if len(mine) >= analysis.get("trials", 2) or not any(trial in series[n] for n in names):
+                continue
+            start = starts.get(trial, 0.0)
+            found = {n: series[n][trial] for n in names if trial in series[n]}
+            happened = [(e.times - start, e.texts) for n in event_names if trial in (e := marks[n].get(trial) or {})]
+            mine.append((row, start, found, happened))
+    drawn = [item for items in picked.values() for item in items]
+    if not drawn:
+        return ["### Recorded traces", "", f"No logged trial holds {names}.", ""]
+    fig, axes = plt.subplots(len(names), 1, figsize=(10, 2.6 * len(names) + 0.8), sharex=True, squeeze=False)
+    colors = plt.cm.tab10.colors
+    table = ["| trial | condition | event time s | event |", "|---|---|---|---|"]
+    for k, (row, start, found, happened) in enumerate(drawn):
+        color = colors[k % 10]
+        label = f"trial {row['trial']} ({_describe(row, list(t.grid))})"
+        for ax, name in zip(axes[:, 0], names, strict=True):
+            if name in found:
+                ax.plot(found[name].times - start, found[name].values, lw=0.9, color=color, label=label)
+            for times, _texts in happened:
+                for when in times:
+                    ax.axvline(when, color=color, ls="--", lw=0.8)
+        for times, texts in happened:
+            table += [
+                f"| {row['trial']} | {row['condition']} | {w:.2f} | {text} |"
+                for w, text in zip(times, texts, strict=True)
+            ]
+    for ax, name in zip(axes[:, 0], names, strict=True):
+        ax.set_ylabel(name.rpartition("/")[2], fontsize=10)
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=7, loc="upper right")
+    axes[-1, 0].set_xlabel("time in the trial, s (dashed: events)", fontsize=11)
+    fig.tight_layout()
+    name = f"{stem}.png"
+    fig.savefig(out / name, dpi=100)
+    plt.close(fig)
+    lines = ["### Recorded traces", "", f"![]({name})", ""]
+    return lines + (table + [""] if len(table) > 2 else [])

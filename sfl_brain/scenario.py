@@ -117,6 +117,27 @@ class ExploitProtocol(Strict):
 TrialValue = float | int | str | bool
 
 
+class PoincareAnalysis(Strict):
+    """``sfl report``: the Poincaré return map of the torso's pitch on every logged trial (E4.5, L1401-1413;
+    :mod:`sfl_brain.poincare`). Needs the body logged on every trial at every tick (``record.body_every: 1``,
+    ``record.signals_hz: 0``) and its series ``body/torso/pitch``, ``body/torso/pitch_rate``."""
+
+    kind: Literal["poincare"]
+
+
+class TraceAnalysis(Strict):
+    """``sfl report``: recorded series of the first logged trials of each condition against time, with the times of
+    recorded events marked (e.g. the torso pitch and a pattern switch)."""
+
+    kind: Literal["trace"]
+    series: list[str] = Field(min_length=1, max_length=8, description="entity paths, e.g. body/torso/pitch")
+    events: list[str] = Field([], max_length=8, description="event entity paths marked on it")
+    trials: int = Field(2, ge=1, le=20, description="logged trials drawn per condition")
+
+
+Analysis = Annotated[PoincareAnalysis | TraceAnalysis, Field(discriminator="kind")]
+
+
 class ConditionsProtocol(Strict):
     """A set of trials under named conditions, for experiments that compare conditions rather than learn (E4.3-E4.7,
     E5.3): every condition runs every point of ``grid`` (trial parameters varied together, every combination),
@@ -147,6 +168,7 @@ class ConditionsProtocol(Strict):
     metrics: list[str] = Field(
         [], max_length=16, description="body metrics sfl report summarises per condition (mean and spread)"
     )
+    analyses: list[Analysis] = Field([], max_length=8, description="what sfl report draws from the recording")
 
     @property
     def trials(self) -> int:
@@ -396,6 +418,8 @@ def _clean_loc(loc: tuple, kind: str) -> tuple:
         if isinstance(part, str) and _SCHEMA_PART.match(part):
             continue
         if len(out) == 1 and out[0] == "protocol" and part in ("learn", "sweep", "exploit", "conditions"):
+            continue
+        if len(out) >= 2 and out[-2] == "analyses" and part in ("poincare", "trace"):  # an analysis's kind tag
             continue
         out.append(part)
     if kind in EXPECTED and len(out) > 1 and out[-1] in _UNION_MEMBERS:
