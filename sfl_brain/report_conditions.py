@@ -155,7 +155,7 @@ class Trials:
                 rows = self.select(c, where)
                 cells = [_value(where[k]) for k in self.kept] + [c]
                 for name in self.metrics:
-                    values = [r.get(f"m_{name}") for r in rows]
+                    values = [r.get(f"m_{name}", r.get(name)) for r in rows]  # a body metric, or quality
                     values = [float(v) for v in values if isinstance(v, int | float) and not isinstance(v, bool)]
                     cells.append(f"{np.mean(values):.3g} ({np.std(values):.2g})" if values else "-")
                 lines.append("| " + " | ".join(cells) + " |")

@@ -166,7 +166,7 @@ class ConditionsProtocol(Strict):
         [], max_length=8, description="grid keys sfl report pools over in its summary (e.g. body.push_phase)"
     )
     metrics: list[str] = Field(
-        [], max_length=16, description="body metrics sfl report summarises per condition (mean and spread)"
+        [], max_length=16, description="body metrics (or `quality`) sfl report summarises per condition (mean and spread)"
     )
     analyses: list[Analysis] = Field([], max_length=8, description="what sfl report draws from the recording")
 
