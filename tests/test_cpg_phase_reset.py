@@ -97,7 +97,7 @@ def test_the_trial_mode_makes_every_reset_a_pulse_a_state_reset_or_none_and_rese
     assert modes["circuit"] == [(1.5, 0, "state"), (1.5, 1, "pulse"), (2.5, 0, "state"), (2.5, 1, "pulse")]
     assert modes["pulse"] == [(1.5, 0, "pulse"), (1.5, 1, "pulse"), (2.5, 0, "pulse"), (2.5, 1, "pulse")]
     assert modes["off"] == []
-    with pytest.raises(ValueError, match=r"none for phase_resets\.1 \(\['hip_r'\]\)$"):
+    with pytest.raises(ValueError, match=r"\('state'\); none for phase_resets\.1 \['hip_r'\]$"):
         network.set_phase_reset("state")  # the right leg's entry stores no state
     with pytest.raises(ValueError, match=r"expected one of \['off', 'pulse', 'state', 'circuit'\]; got 'on'"):
         network.set_phase_reset("on")

@@ -25,13 +25,13 @@ reset per trial.
   (``at``) or on a push detector (the forward rate of ``push_input``, e.g. the pelvis angle, above ``push_rate``).
   The chosen joints take their new pattern (named: plateau, quiescent, ... as ``patterns.PATTERN_POINTS``, or a
   (sigma_s, sigma_f)), V = q = 0, and a kick of +I into RG-F, -I into RG-E for 0.2 s, per joint if given (its sign =
-  the switch's direction, L1437), or signed by the way each joint moves (``kick_direction: motion``, E4.4: "each hip
-  kicked in the direction it is moving"). A position-commanded joint's command goes on from its measured angle
-  (``theta0: continuous``, the default; ``angle``: theta_0 := the measured angle, the rule of the author's 2017
-  scripts, digest §5, which makes the command jump by the reflexes' offset in our circuits). ``inhibit`` silences
-  the RG-RG couplings between joint pairs (L1311: hip-knee inhibited, ankle-hip kept). It becomes one more entry of
-  the circuit's ``switches``; the network carries it out. On logged trials each switch is a telemetry event
-  ``events/pattern_switch``.
+  the switch's direction, L1437), or signed by the way each joint moves (``kick_direction: motion``, issue 23's
+  reading of E4.4: each joint kicked in the direction it is moving). A position-commanded joint's command goes on
+  from its measured angle (``theta0: continuous``, the default; ``angle``: theta_0 := the measured angle, the rule of
+  the author's 2017 scripts, digest §5, which makes the command jump by the reflexes' offset in our circuits).
+  ``inhibit`` silences the RG-RG couplings between joint pairs (L1311: hip-knee inhibited, ankle-hip kept). It
+  becomes one more entry of the circuit's ``switches``; the network carries it out. On logged trials each switch is a
+  telemetry event ``events/pattern_switch``.
 - ``switches``: named presets of the same form, all carried by the network and none armed unless a trial names one
   (the trial parameter ``switch``), so that one run can compare conditions trial by trial.
 - Trial parameters (what a protocol sets per trial, ``TRIAL_PARAMS``): ``sigma_s``, ``sigma_f`` (E4.2: the
@@ -104,13 +104,14 @@ class PatternSwitch(ModuleParams):
     theta0: Literal["angle", "continuous"] = Field(
         "continuous",
         description="a position-commanded joint's theta_0 at the switch: continuous (the command goes on from the "
-        "measured angle, as the thesis's switching) or angle (theta_0 := the measured angle: the author's 2017 "
-        "scripts, digest §5, whose circuit has no reflexes; here the command jumps by the reflexes' offset)",
+        "measured angle; the thesis switches patterns and says nothing of the offset) or angle (theta_0 := the "
+        "measured angle: the author's 2017 scripts, digest §5, whose circuit has no reflexes; here the command jumps "
+        "by the reflexes' offset)",
     )
     kick_direction: Literal["fixed", "motion"] = Field(
         "fixed",
-        description="fixed: each kick as given; motion (E4.4): its magnitude as given, its sign pushing the joint "
-        "further the way it moves at the switch (its angle's rate over the last tick)",
+        description="fixed: each kick as given; motion (issue 23's E4.4): its magnitude as given, its sign pushing the "
+        "joint further the way it moves at the switch (its angle's rate over the last tick)",
     )
 
     def circuit_entry(self, name: str | None = None, armed: bool = True) -> dict:
@@ -250,7 +251,7 @@ class CPGParams(ModuleParams):
                 problems.append(
                     (("switches", key, "trigger"), "expected 'time' or 'push' (a preset fires on one); got 'none'")
                 )
-        lacking = _missing_states(circuit)
+        lacking = circuit.state_reset_problem()
         if self.phase_reset == "state" and lacking:
             problems.append((("phase_reset",), lacking))
         if problems:
@@ -269,20 +270,6 @@ class CPGParams(ModuleParams):
 
 
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
-
-
-def _missing_states(circuit: Circuit) -> str:
-    """Why phase_reset "state" cannot run on ``circuit`` (entries without a stance-onset state for each of their
-    joints), or "" when it can."""
-    lacking = [
-        f"phase_resets.{i} {r.missing_states()}" for i, r in enumerate(circuit.phase_resets) if r.missing_states()
-    ]
-    if not lacking:
-        return ""
-    return (
-        f"expected a stance-onset state for every joint of every phase reset of circuit {circuit.name} ('state'); "
-        f"none for {', '.join(lacking)}"
-    )
 
 
 def command_names(circuit: Circuit) -> tuple[str, ...]:
@@ -377,7 +364,7 @@ def _check_trial_value(name: str, value, circuit: Circuit | None, presets: list[
             hint = nearest(value, PHASE_RESET_MODES) if isinstance(value, str) else None
             tail = f" (did you mean {hint!r}?)" if hint else ""
             raise ValueError(f"phase_reset: expected one of {list(PHASE_RESET_MODES)}; got {value!r}{tail}")
-        lacking = _missing_states(circuit) if circuit is not None and value == "state" else ""
+        lacking = circuit.state_reset_problem() if circuit is not None and value == "state" else ""
         if lacking:
             raise ValueError(f"phase_reset: {lacking}")
         return

@@ -110,7 +110,7 @@ class Joint(Strict):
     synapses: dict[Name, dict[Target, Number]] = {}  # sensory neuron -> {target: weight}
     gain: Number = 1.0  # M of (3.6) (voltage) or G of theta_0 + G (MN_E - MN_F) (position)
     theta0: Number = 0.0  # position command offset, rad
-    angle_input: Name | None = None  # input holding this joint's angle (for theta_0 := angle on a switch)
+    angle_input: Name | None = None  # input holding this joint's angle (switches, start_from_pose)
 
 
 class SensoryNeuron(Strict):
@@ -186,9 +186,9 @@ class PhaseReset(Strict):
 
 
 class Switch(Strict):
-    """Pattern switching (digest §7.11): new (sigma_s, sigma_f) for the named joints, V = q = 0, theta_0 := the
-    measured angle (or, with ``theta0: continuous``, the value that keeps the command at that angle), then a kick
-    of ``kick`` (into RG-F; RG-E gets its negative) for ``kick_duration`` s.
+    """Pattern switching (digest §7.11): new (sigma_s, sigma_f) for the named joints, V = q = 0, a position command
+    that goes on from the measured angle (``theta0``, below), then a kick of ``kick`` (into RG-F; RG-E gets its
+    negative) for ``kick_duration`` s, its sign as given or by the joint's motion (``kick_direction``).
 
     Triggered once: at time ``at`` (s), or when the input ``input`` exceeds ``above`` (a level), or when its rate of
     change exceeds ``rate_above`` (per s; the push detector of §7.11, e.g. the torso's pitch rate). ``joint_kicks``
@@ -208,15 +208,18 @@ class Switch(Strict):
     joint_kicks: dict[Name, Number] = {}
     inhibit: list[Annotated[list[Name], Field(min_length=2, max_length=2)]] = []
     # A position-commanded joint's theta_0 at the switch. "continuous" (the default): theta_0 := angle - G (MN_E - MN_F)
-    # with the switch tick's MN, so the command equals the measured angle: the joint goes on from where it is, as the
-    # thesis's switching has it (a new pattern, no jump; L1284-1324, L1430-1437). "angle": theta_0 := the measured
-    # angle. That rule is not the thesis's: it comes from the author's later (2017) scripts (digest §5, last bullet),
-    # whose circuit has its reflexes off; in a circuit with reflexes G (MN_E - MN_F) is not 0 at the switch, and the
-    # command jumps by that offset (E4.7, docs/results/chapter4/humanoid.md).
+    # with the switch tick's MN, so the command equals the measured angle: the joint goes on from where it is. The
+    # thesis switches the RG/PF patterns (L1284-1324, L1430-1437) and says nothing of the command's offset; this
+    # changes nothing else. "angle": theta_0 := the measured angle. That rule is not the thesis's: it comes from the
+    # author's later (2017) scripts (digest §5, last bullet), whose circuit has its reflexes off; in a circuit with
+    # reflexes G (MN_E - MN_F) is not 0 at the switch, and the command jumps by that offset (E4.7,
+    # docs/results/chapter4/humanoid.md).
     theta0: Literal["angle", "continuous"] = "continuous"
-    # "fixed": each joint's kick as given. "motion" (E4.4, "each hip kicked in the direction it is moving"): its
-    # magnitude as given, its sign such that the RG pushes the joint further the way it moves at the switch (the rate
-    # of its angle_input over the last tick; the given sign when it does not move or on the trial's first tick)
+    # "fixed": each joint's kick as given. "motion" (issue 23's reading of E4.4: each joint kicked in the direction it
+    # is moving; "the direction of the switching in each joint is related to the direction of the injected current",
+    # L1437): its magnitude as given, its sign such that the RG pushes the joint further the way it moves at the switch
+    # (the rate of its angle_input over the last tick; the given sign when it does not move or on the trial's first
+    # tick)
     kick_direction: Literal["fixed", "motion"] = "fixed"
     name: Name | None = None  # a label, shown in the switch's event (the controller names its presets so)
     armed: bool = True  # armed at a trial's start (a controller's presets are not: it arms the one a trial chooses)
@@ -249,6 +252,19 @@ class Circuit(Strict):
 
     def joint_index(self, name: str) -> int:
         return [j.name for j in self.joints].index(name)
+
+    def state_reset_problem(self) -> str:
+        """Why the phase resets cannot all act as state resets (entries without a stance-onset state for each of
+        their joints), or "" when they can (``phase_reset: state``)."""
+        lacking = [
+            f"phase_resets.{i} {r.missing_states()}" for i, r in enumerate(self.phase_resets) if r.missing_states()
+        ]
+        if not lacking:
+            return ""
+        return (
+            f"expected a stance-onset state for every joint of every phase reset of circuit {self.name} ('state'); "
+            f"none for {', '.join(lacking)}"
+        )
 
     def neuron_index(self, ref: str) -> int:
         """Index of ``joint.E`` / ``joint.F`` in the network's neuron vector (2 j for E, 2 j + 1 for F)."""

@@ -40,7 +40,7 @@ Choices where the thesis is silent (CPG-HUMANOID.md, "the digest", §7), followe
   continuous``, the default: the joint goes on from where it is). The author's later (2017) scripts set theta_0 :=
   the measured angle instead (digest §5, last bullet; ``theta0: angle``): their circuit has its reflexes off, and in
   ours, whose reflexes hold MN_E - MN_F away from 0, that makes the command jump by the reflexes' offset. A kick's
-  sign is given, or (``kick_direction: motion``, E4.4) follows the way the joint moves.
+  sign is given, or (``kick_direction: motion``, issue 23's E4.4) follows the way the joint moves.
 
 What is continuous and what is sampled: the RG states (V, q) and the RG-RG synapses (a function of V)
 are integrated with RK4. The injected currents (kicks, phase-reset and switching pulses) and the sensory
@@ -412,13 +412,9 @@ class CPGNetwork:
         if mode not in self.PHASE_RESET_MODES:
             raise ValueError(f"phase_reset: expected one of {list(self.PHASE_RESET_MODES)}; got {mode!r}")
         resets = self.circuit.phase_resets
-        if mode == "state":
-            lacking = [f"phase_resets.{i} ({r.missing_states()})" for i, r in enumerate(resets) if r.missing_states()]
-            if lacking:
-                raise ValueError(
-                    f"phase_reset: 'state' needs a stance-onset state for every joint of every phase reset of circuit "
-                    f"{self.circuit.name}; none for {', '.join(lacking)}"
-                )
+        problem = self.circuit.state_reset_problem() if mode == "state" else ""
+        if problem:
+            raise ValueError(f"phase_reset: {problem}")
         self.phase_reset_enabled = np.array([r.enabled and mode != "off" for r in resets], dtype=bool)
         as_state = [r.mode == "state" if mode == "circuit" else mode == "state" for r in resets]
         self.phase_reset_as_state = np.array(as_state, dtype=bool)
@@ -683,8 +679,9 @@ class CPGNetwork:
         self._previous_phi = phi.copy()
 
     def _kicks_by_motion(self, kicks: dict[str, float], phi: np.ndarray, control_dt: float) -> tuple[dict, dict]:
-        """E4.4 ("each hip kicked in the direction it is moving"): each joint's kick keeps its magnitude, its sign
-        pushes the joint further the way it moves. Its rate toward extension is sign(G) d angle / dt over the last
+        """``kick_direction: motion`` (issue 23's reading of E4.4: each joint kicked in the direction it is moving; the
+        switch's direction is the injected current's, L1437): each joint's kick keeps its magnitude, its sign pushes
+        the joint further the way it moves. Its rate toward extension is sign(G) d angle / dt over the last
         tick (G > 0 where + rotation is extension; the angle_input's change over ``control_dt``); a kick of +I goes
         into RG-F (§5's convention), so a joint moving toward extension gets -|kick|, one moving toward flexion
         +|kick|, one not moving (or on the trial's first tick, no rate yet) its kick as given. Returns the kicks per
