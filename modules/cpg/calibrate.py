@@ -25,6 +25,7 @@ that sensor).
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 from dataclasses import dataclass
 
@@ -268,11 +269,11 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    given = sys.argv[1:] if argv is None else argv
     header = (
         f"stance-onset states of circuit {args.circuit} on body {args.body}: its unperturbed gait (phase resets off,\n"
         f"no push), {args.seconds:g} s, strikes after {args.after:g} s. Re-run whenever the gait changes:\n"
-        f"python -m sfl_brain.modules.cpg.calibrate stance {args.circuit} --body {args.body} --seconds {args.seconds:g}"
-        f" --after {args.after:g}"
+        f"python -m sfl_brain.modules.cpg.calibrate {' '.join(shlex.quote(a) for a in given)}"
     )
     sys.stdout.write(snippet(states, header))
     return 0
