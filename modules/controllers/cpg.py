@@ -288,6 +288,7 @@ class CPGController(Controller):
         params = params if params is not None else self.Params()
         self.circuit = params.build_circuit()
         self.network = CPGNetwork(self.circuit)
+        self.network.set_phase_reset(params.phase_reset)  # as each trial's configure does, for a network used directly
         #: per instance: the neurons depend on the circuit (see the report on ``Controller.NEURONS``)
         self.NEURONS = tuple(self.network.neuron_names())
         joints = params.pattern_joints or [j.name for j in self.circuit.joints]
