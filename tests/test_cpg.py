@@ -429,7 +429,13 @@ def knee_switch_walked_1s(switch: dict):
 
 
 def test_pattern_switch_sets_the_pattern_resets_the_cell_and_takes_the_measured_angle():
-    switch = {"joints": {"knee_l": {"sigma_s": 1.0, "sigma_f": 0.25}}, "input": "torso_pitch", "above": 0.3}
+    """``theta0: angle`` (the author's 2017 scripts, digest §5; not the default): theta_0 := the measured angle."""
+    switch = {
+        "joints": {"knee_l": {"sigma_s": 1.0, "sigma_f": 0.25}},
+        "input": "torso_pitch",
+        "above": 0.3,
+        "theta0": "angle",
+    }
     circuit, network, knee, sensors = knee_switch_walked_1s(switch)
     assert network.sigma_s[0, 2 * knee] == 5.0
     sensors[circuit.inputs.index("torso_pitch")] = 0.5  # the push detector fires
@@ -444,7 +450,9 @@ def test_pattern_switch_sets_the_pattern_resets_the_cell_and_takes_the_measured_
     np.testing.assert_array_equal(network.theta0, theta0)
 
 
-def test_a_continuous_switch_keeps_the_command_at_the_measured_angle_where_the_thesis_jumps():
+def test_a_continuous_switch_keeps_the_command_at_the_measured_angle_where_theta0_angle_jumps():
+    """``theta0: continuous`` (the default) keeps the command at the measured angle; ``angle`` (the rule of the author's
+    2017 scripts, whose circuit has no reflexes; digest §5) makes it jump by the offset the reflexes held."""
     commands = {}
     for theta0 in ("angle", "continuous"):
         switch = {"joints": {"knee_l": {"sigma_s": 5.0, "sigma_f": 17.5}}, "at": 1.0, "theta0": theta0}

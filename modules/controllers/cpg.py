@@ -16,20 +16,31 @@ mapping, as ``--set modules.controller.params.circuit_overrides.joints.0.rg.sigm
 path or value fails ``sfl check`` naming the circuit's key path. The network is rebuilt from them per process, and
 reset per trial.
 
-- ``phase_reset`` (§7.10, E4.3 L1268-1282) switches the circuit's phase resets (heel contact -> hip RG pulse) on or
-  off; on, each keeps its own ``enabled`` flag.
+- ``phase_reset`` (§7.10, E4.3 L1268-1282): how the circuit's phase resets (heel contact -> the leg's RGs) act:
+  "circuit" (as the file says; each entry keeps its own ``enabled`` flag and ``mode``), "pulse" (every entry a
+  current pulse into its joint's RG), "state" (every entry a jump of its joints' RGs to the stance-onset state it
+  stores; an error if one stores none) or "off". ``true`` / ``false`` are "circuit" / "off". A trial may choose
+  otherwise (the trial parameter of the same name).
 - ``switch`` (§7.11, E4.4 L1284-1324, E4.7 L1430-1437): pattern switching of chosen joints, once per trial, on a time
   (``at``) or on a push detector (the forward rate of ``push_input``, e.g. the pelvis angle, above ``push_rate``).
   The chosen joints take their new pattern (named: plateau, quiescent, ... as ``patterns.PATTERN_POINTS``, or a
-  (sigma_s, sigma_f)), V = q = 0, theta_0 := the measured angle (position circuits), and a kick of +I into RG-F,
-  -I into RG-E for 0.2 s, per joint if given (its sign = the switch's direction, L1437); ``inhibit`` silences the
-  RG-RG couplings between joint pairs (L1311: hip-knee inhibited, ankle-hip kept). It becomes one more entry of the
-  circuit's ``switches``; the network carries it out. On logged trials each switch is a telemetry event
-  ``events/pattern_switch``.
-- Trial parameters (what a learning protocol sets per trial, ``TRIAL_PARAMS``): ``sigma_s``, ``sigma_f`` (E4.2: the
+  (sigma_s, sigma_f)), V = q = 0, and a kick of +I into RG-F, -I into RG-E for 0.2 s, per joint if given (its sign =
+  the switch's direction, L1437), or signed by the way each joint moves (``kick_direction: motion``, issue 23's
+  reading of E4.4: each joint kicked in the direction it is moving). A position-commanded joint's command goes on
+  from its measured angle (``theta0: continuous``, the default; ``angle``: theta_0 := the measured angle, the rule of
+  the author's 2017 scripts, digest §5, which makes the command jump by the reflexes' offset in our circuits).
+  ``inhibit`` silences the RG-RG couplings between joint pairs (L1311: hip-knee inhibited, ankle-hip kept). It
+  becomes one more entry of the circuit's ``switches``; the network carries it out. On logged trials each switch is a
+  telemetry event ``events/pattern_switch``.
+- ``switches``: named presets of the same form, all carried by the network and none armed unless a trial names one
+  (the trial parameter ``switch``), so that one run can compare conditions trial by trial.
+- Trial parameters (what a protocol sets per trial, ``TRIAL_PARAMS``): ``sigma_s``, ``sigma_f`` (E4.2: the
   RG pattern (w1, w2) = (sigma_s, sigma_f) learnt for all joints at once, L1251, "the same pattern in all joints
-  exists whenever the coupling circuitry is active", L1286; ``pattern_joints`` restricts them to some joints), and the
-  descending control ``alpha_mlr``, ``theta_mlr`` of (4.9) (E4.6 L1417-1426), on the same joints.
+  exists whenever the coupling circuitry is active", L1286; ``pattern_joints`` restricts them to some joints), the
+  descending control ``alpha_mlr``, ``theta_mlr`` of (4.9) (E4.6 L1417-1426), on the same joints; ``phase_reset``
+  ("off", "pulse", "state", "circuit"; default: the parameter ``phase_reset``); ``switch`` ("none": no pattern switch
+  at all this trial, not even the circuit file's own; a preset's name: that preset only; default: the circuit's own
+  switches and the parameter ``switch``).
 
 On logged trials every neuron is shown on ``sim_time``: per joint and side (E, F) RG V and q, PF and MN, then the
 sensory neurons (``CPGNetwork.neuron_names``).
@@ -38,6 +49,7 @@ sensory neurons (``CPGNetwork.neuron_names``).
 from __future__ import annotations
 
 import math
+import re
 from typing import Any, Literal
 
 import numpy as np
@@ -54,7 +66,9 @@ from sfl_brain.scenario import ScenarioError
 from sfl_brain.telemetry import Event
 
 #: what a trial may set (see the module docstring)
-TRIAL_PARAMS = ("sigma_s", "sigma_f", "alpha_mlr", "theta_mlr")
+TRIAL_PARAMS = ("sigma_s", "sigma_f", "alpha_mlr", "theta_mlr", "phase_reset", "switch")
+#: how the circuit's phase resets act (``phase_reset``, module and trial parameter)
+PHASE_RESET_MODES = CPGNetwork.PHASE_RESET_MODES
 
 
 class PatternPoint(ModuleParams):
@@ -88,19 +102,26 @@ class PatternSwitch(ModuleParams):
     joint_kicks: dict[str, float] = Field({}, description="a switched joint's own kick; its sign = direction (L1437)")
     inhibit: list[tuple[str, str]] = Field([], description="joint pairs whose RG-RG couplings are silenced (L1311)")
     theta0: Literal["angle", "continuous"] = Field(
-        "angle",
-        description="a position-commanded joint's theta_0 at the switch: the measured angle (§7.11), or continuous "
-        "(chosen here): the command stays at the measured angle, no jump by the reflexes' offset",
+        "continuous",
+        description="a position-commanded joint's theta_0 at the switch: continuous (the command goes on from the "
+        "measured angle; the thesis switches patterns and says nothing of the offset) or angle (theta_0 := the "
+        "measured angle: the author's 2017 scripts, digest §5, whose circuit has no reflexes; here the command jumps "
+        "by the reflexes' offset)",
+    )
+    kick_direction: Literal["fixed", "motion"] = Field(
+        "fixed",
+        description="fixed: each kick as given; motion (issue 23's E4.4): its magnitude as given, its sign pushing the "
+        "joint further the way it moves at the switch (its angle's rate over the last tick)",
     )
 
-    def circuit_entry(self) -> dict:
+    def circuit_entry(self, name: str | None = None, armed: bool = True) -> dict:
         """This switch as an entry of a circuit's ``switches`` (modules/cpg/circuit.py ``Switch``)."""
         joints = {}
-        for name, pattern in self.joints.items():
+        for joint, pattern in self.joints.items():
             sigma_s, sigma_f = (
                 PATTERN_POINTS[pattern] if isinstance(pattern, str) else (pattern.sigma_s, pattern.sigma_f)
             )
-            joints[name] = {"sigma_s": float(sigma_s), "sigma_f": float(sigma_f)}
+            joints[joint] = {"sigma_s": float(sigma_s), "sigma_f": float(sigma_f)}
         trigger = (
             {"at": self.at} if self.trigger == "time" else {"input": self.push_input, "rate_above": self.push_rate}
         )
@@ -112,6 +133,9 @@ class PatternSwitch(ModuleParams):
             "joint_kicks": dict(self.joint_kicks),
             "inhibit": [list(pair) for pair in self.inhibit],
             "theta0": self.theta0,
+            "kick_direction": self.kick_direction,
+            "name": name,
+            "armed": armed,
         }
 
 
@@ -139,12 +163,25 @@ class CPGParams(ModuleParams):
         description="a shipped circuit (modules/cpg/circuits) or a YAML file (absolute, or from the cwd)",
     )
     circuit_overrides: dict[str, Any] = Field({}, description="circuit key path -> value (nested mappings merge)")
-    phase_reset: bool = Field(True, description="the circuit's phase resets on (each as its `enabled`) or all off")
+    phase_reset: Literal["off", "pulse", "state", "circuit"] = Field(
+        "circuit",
+        description="how the circuit's phase resets act when a trial does not say: as the file says (circuit; also "
+        "true), all pulses, all state resets, or off (also false)",
+    )
     substeps: int = Field(10, ge=1, le=100, description="RK4 steps per control tick: h = tick / substeps (1 ms, §7.2)")
     pattern_joints: list[str] = Field(
         [], description="joints the trial's sigma_s, sigma_f, alpha_mlr, theta_mlr set; empty = all (L1286)"
     )
     switch: PatternSwitch = PatternSwitch()
+    switches: dict[str, PatternSwitch] = Field(
+        {}, description="named switch presets; a trial arms one by its name (trial parameter switch)"
+    )
+
+    @field_validator("phase_reset", mode="before")
+    @classmethod
+    def _bool_is_circuit_or_off(cls, value: Any) -> Any:
+        """``true`` / ``false``, as before the modes existed: "circuit" / "off"."""
+        return ("circuit" if value else "off") if isinstance(value, bool) else value
 
     @field_validator("circuit")
     @classmethod
@@ -179,31 +216,60 @@ class CPGParams(ModuleParams):
 
         for i, name in enumerate(self.pattern_joints):
             need(("pattern_joints", i), name, joints, f"joints of circuit {circuit.name}")
-        s = self.switch
-        for name in s.joints:
-            need(("switch", "joints", name), name, joints, f"joints of circuit {circuit.name}")
-        for name in s.joint_kicks:
-            need(("switch", "joint_kicks", name), name, list(s.joints), "joints this switch switches")
-        for i, pair in enumerate(s.inhibit):
-            for k, name in enumerate(pair):
-                need(("switch", "inhibit", i, k), name, joints, f"joints of circuit {circuit.name}")
-        if s.trigger != "none" and not s.joints:
-            problems.append((("switch", "joints"), f"expected the joints to switch (trigger {s.trigger!r}); got none"))
-        if s.trigger == "push":
-            need(("switch", "push_input"), s.push_input, inputs, f"inputs of circuit {circuit.name}")
+        switches = [(("switch",), self.switch)] + [(("switches", key), s) for key, s in self.switches.items()]
+        for at, s in switches:
+            for name in s.joints:
+                need((*at, "joints", name), name, joints, f"joints of circuit {circuit.name}")
+            for name in s.joint_kicks:
+                need((*at, "joint_kicks", name), name, list(s.joints), "joints this switch switches")
+            for i, pair in enumerate(s.inhibit):
+                for k, name in enumerate(pair):
+                    need((*at, "inhibit", i, k), name, joints, f"joints of circuit {circuit.name}")
+            if s.trigger != "none" and not s.joints:
+                problems.append(((*at, "joints"), f"expected the joints to switch (trigger {s.trigger!r}); got none"))
+            if s.trigger == "push":
+                need((*at, "push_input"), s.push_input, inputs, f"inputs of circuit {circuit.name}")
+            if s.kick_direction == "motion":
+                angles = [j.name for j in circuit.joints if j.angle_input is not None]
+                for name in (name for name in s.joints if name in joints and name not in angles):
+                    problems.append(
+                        (
+                            (*at, "joints", name),
+                            f"expected a joint with an angle_input (kick_direction motion); "
+                            f"{name!r} has none in circuit {circuit.name}",
+                        )
+                    )
+        for key, s in self.switches.items():
+            if key == "none" or not _NAME.match(key):
+                problems.append(
+                    (
+                        ("switches", key),
+                        f"expected a preset name (a letter, then letters, digits, _; not 'none'); got {key!r}",
+                    )
+                )
+            if s.trigger == "none":
+                problems.append(
+                    (("switches", key, "trigger"), "expected 'time' or 'push' (a preset fires on one); got 'none'")
+                )
+        lacking = circuit.state_reset_problem()
+        if self.phase_reset == "state" and lacking:
+            problems.append((("phase_reset",), lacking))
         if problems:
             raise _invalid(problems, self.model_dump(mode="json"))
         return self
 
     def build_circuit(self) -> Circuit:
-        """The circuit the controller runs: the file, its overrides, the phase-reset switch and the pattern switch."""
+        """The circuit the controller runs: the file, its overrides, the pattern switch (armed when a trial does not
+        choose) and the presets (armed only by the trial that names one, ``CPGController.preset_index``)."""
         data = apply_overrides(read_circuit_data(self.circuit), self.circuit_overrides).model_dump()
-        if not self.phase_reset:
-            for reset in data["phase_resets"]:
-                reset["enabled"] = False
         if self.switch.trigger != "none":
             data["switches"].append(self.switch.circuit_entry())
+        for key, preset in self.switches.items():
+            data["switches"].append(preset.circuit_entry(name=key, armed=False))
         return validate_circuit(data, str(circuit_path(self.circuit)))
+
+
+_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
 
 def command_names(circuit: Circuit) -> tuple[str, ...]:
@@ -222,11 +288,14 @@ class CPGController(Controller):
         params = params if params is not None else self.Params()
         self.circuit = params.build_circuit()
         self.network = CPGNetwork(self.circuit)
+        self.network.set_phase_reset(params.phase_reset)  # as each trial's configure does, for a network used directly
         #: per instance: the neurons depend on the circuit (see the report on ``Controller.NEURONS``)
         self.NEURONS = tuple(self.network.neuron_names())
         joints = params.pattern_joints or [j.name for j in self.circuit.joints]
         self._pattern_joints = joints
         self._pattern_columns = 2 * np.array([self.circuit.joint_index(n) for n in joints])  # their E cells
+        #: preset name -> its index in ``circuit.switches`` (what the trial parameter ``switch`` arms)
+        self.preset_index = {s.name: i for i, s in enumerate(self.circuit.switches) if not s.armed and s.name}
         self._control_dt = 0.01
         self._event_log: tuple[int, float] | None = None  # (trial, t0) of a logged trial
         super().__init__(params, seed=seed)
@@ -238,12 +307,13 @@ class CPGController(Controller):
         return tuple(circuit.inputs), command_names(circuit)
 
     @classmethod
-    def check_trial_param(cls, name: str, value) -> None:
-        """Raise ValueError if ``value`` cannot be trial parameter ``name`` (``sfl check`` calls this)."""
-        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-            raise ValueError(f"{name}: expected a finite number; got {value!r}")
-        if name in ("sigma_s", "sigma_f") and value < 0:
-            raise ValueError(f"{name}: expected a number >= 0 (Table 4.1: [0, 5]); got {value!r}")
+    def check_trial_param(cls, name: str, value, params: CPGParams | None = None) -> None:
+        """Raise ValueError if ``value`` cannot be trial parameter ``name`` (``sfl check`` calls this). Without
+        ``params`` the type and the allowed strings are checked; with the module's ``params`` also what depends on
+        them: that a ``switch`` preset exists, that the circuit's phase resets store states for "state"."""
+        circuit = params.build_circuit() if params is not None and name == "phase_reset" else None
+        presets = list(params.switches) if params is not None else None
+        _check_trial_value(name, value, circuit, presets)
 
     def configure(self, params: dict, seed: int) -> None:
         unknown = [k for k in params if k not in TRIAL_PARAMS]
@@ -252,7 +322,7 @@ class CPGController(Controller):
             tail = f" (did you mean `{hint}`?)" if hint else ""
             raise ValueError(f"CPGController takes trial parameters {list(TRIAL_PARAMS)}; got {unknown}{tail}")
         for name, value in params.items():
-            self.check_trial_param(name, value)
+            _check_trial_value(name, value, self.circuit, list(self.preset_index))
         msg = self.trial  # the base sets it before configure (None when configured by hand, e.g. in a test)
         self._control_dt = msg.dt if msg is not None else 0.01
         log = msg is not None and msg.log and self.telemetry is not None
@@ -266,6 +336,10 @@ class CPGController(Controller):
             network.set_pattern(sigma_s, sigma_f, joints=self._pattern_joints)
         if "alpha_mlr" in params or "theta_mlr" in params:  # (4.9) descending control
             network.set_descending(params.get("alpha_mlr"), params.get("theta_mlr"), joints=self._pattern_joints)
+        network.set_phase_reset(params.get("phase_reset", self.params.phase_reset))  # §7.10, E4.3
+        choice = params.get("switch")  # §7.11, E4.4: None = the circuit's switches and the parameter `switch`
+        if choice is not None:
+            network.arm_switches([] if choice == "none" else [self.preset_index[choice]])
 
     def step(self, sensors: np.ndarray) -> np.ndarray:
         self.network.advance(sensors, self._control_dt, self.params.substeps)
@@ -284,6 +358,31 @@ class CPGController(Controller):
         super().flush_neurons()
 
 
+def _check_trial_value(name: str, value, circuit: Circuit | None, presets: list[str] | None) -> None:
+    """``check_trial_param`` and ``configure``'s check: ``circuit`` and ``presets`` None when not known."""
+    if name == "phase_reset":
+        if not isinstance(value, str) or value not in PHASE_RESET_MODES:
+            hint = nearest(value, PHASE_RESET_MODES) if isinstance(value, str) else None
+            tail = f" (did you mean {hint!r}?)" if hint else ""
+            raise ValueError(f"phase_reset: expected one of {list(PHASE_RESET_MODES)}; got {value!r}{tail}")
+        lacking = circuit.state_reset_problem() if circuit is not None and value == "state" else ""
+        if lacking:
+            raise ValueError(f"phase_reset: {lacking}")
+        return
+    if name == "switch":
+        if not isinstance(value, str):
+            raise ValueError(f'switch: expected "none" or the name of a preset (a string); got {value!r}')
+        if presets is not None and value != "none" and value not in presets:
+            hint = nearest(value, presets)
+            tail = f" (did you mean {hint!r}?)" if hint else ""
+            raise ValueError(f'switch: expected "none" or one of the presets {presets}; got {value!r}{tail}')
+        return
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ValueError(f"{name}: expected a finite number; got {value!r}")
+    if name in ("sigma_s", "sigma_f") and value < 0:
+        raise ValueError(f"{name}: expected a number >= 0 (Table 4.1: [0, 5]); got {value!r}")
+
+
 def switch_text(event) -> str:
     """One line saying what a pattern switch did."""
     names = {point: kind for kind, point in PATTERN_POINTS.items()}
@@ -294,7 +393,9 @@ def switch_text(event) -> str:
             f"{joint} -> {kind + ' ' if kind else ''}(sigma_s {point[0]:g}, sigma_f {point[1]:g}), "
             f"kick {event.kicks[joint]:+g}"
         )
-    text = "pattern switch: " + "; ".join(parts)
+    text = f"pattern switch{' ' + event.name if event.name else ''}: " + "; ".join(parts)
+    if event.kick_direction == "motion":
+        text += " (kicks signed by each joint's motion)"
     if event.inhibited:
         text += "; couplings silenced between " + ", ".join(f"{a}-{b}" for a, b in event.inhibited)
     return text

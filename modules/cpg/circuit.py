@@ -28,8 +28,13 @@ Layout of a file (see ``circuits/*.yaml``; CPG-HUMANOID.md is "the digest" below
     couplings: [{source: hip_l.E, target: hip_r.F, weight: 1.0}]   # RG -> RG, through tanh(V/A_f)
     kicks: [{joints: [hip_l], start: 0.0, duration: 0.08, amplitude: 1.0}]
     phase_resets: [{sensor: GB_l, joint: hip_l, amplitude: -1.0, duration: 0.04, enabled: true}]
+                                       # mode: pulse (as this) or state: {sensor: GB_l, joint: hip_l,
+                                       #   mode: state, joints: [hip_l, knee_l, ankle_l], refractory: 0.4, after: 2.0,
+                                       #   state: {hip_l: {E: [V, q], F: [V, q]}, ...}} (calibrate.py measures it)
     switches: [{joints: {knee_l: {sigma_s: .., sigma_f: ..}}, at: 2.0}]   # or input: ..., above: ... (a level)
                                        # or input: ..., rate_above: ... (a push detector); inhibit: [[hip_l, knee_l]]
+                                       # theta0: continuous | angle; kick_direction: fixed | motion
+    start_from_pose: [ankle_pitch_l]   # position circuits: these joints' command equals the measured pose at t = 0
 
 Current pulses (kicks, phase resets, switch kicks) follow the author's code sign convention (digest
 §5): ``amplitude`` is the current injected into the flexor RG, the extensor RG receives its negative.
@@ -39,6 +44,7 @@ from __future__ import annotations
 
 import copy
 import functools
+import typing
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -104,7 +110,7 @@ class Joint(Strict):
     synapses: dict[Name, dict[Target, Number]] = {}  # sensory neuron -> {target: weight}
     gain: Number = 1.0  # M of (3.6) (voltage) or G of theta_0 + G (MN_E - MN_F) (position)
     theta0: Number = 0.0  # position command offset, rad
-    angle_input: Name | None = None  # input holding this joint's angle (for theta_0 := angle on a switch)
+    angle_input: Name | None = None  # input holding this joint's angle (switches, start_from_pose)
 
 
 class SensoryNeuron(Strict):
@@ -133,21 +139,56 @@ class Kick(Strict):
     amplitude: Number
 
 
+Pair = Annotated[list[Number], Field(min_length=2, max_length=2)]
+
+
+class CellState(Strict):
+    """The state of one joint's two RG cells, each [V, q] (the model's mV, (4.1)-(4.2))."""
+
+    E: Pair
+    F: Pair
+
+
 class PhaseReset(Strict):
-    """Phase resetting (digest §7.10): when ``sensor`` rises through ``threshold``, a pulse into ``joint``'s RG."""
+    """Phase resetting (thesis L1270-1282, digest §7.10): "the rhythmic neurons were driven by ground contact force
+    sensors". When the sensory neuron ``sensor`` rises through ``threshold`` (below it last tick, at or above it now):
+
+    - ``mode: pulse`` (§7.10's first choice): a current pulse into ``joint``'s RG, ``amplitude`` into RG-F (RG-E gets
+      its negative) for ``duration`` s. Landing mid-burst it delays the rhythm rather than resetting it;
+    - ``mode: state`` (§7.10's alternative): the RGs of ``joints`` (default: ``joint`` alone; a leg's joints, e.g. hip,
+      knee and ankle) jump to ``state``, the stance-onset state taken from the unperturbed gait (measured by
+      ``python -m sfl_brain.modules.cpg.calibrate stance``): the phase is set, whatever it was.
+
+    Either way once per landing: not within ``refractory`` s of this entry's last reset (a heel bouncing), and not
+    before ``after`` s of trial time (the start-up transient). The defaults (pulse, 0, 0) are the behaviour before
+    these fields existed."""
 
     sensor: Name
-    joint: Name
+    joint: Name  # the RG a pulse goes into (a state entry keeps it: a trial may ask for pulses)
+    mode: Literal["pulse", "state"] = "pulse"
     amplitude: Number = -1.0  # into RG-F (RG-E gets +1): the sign that starts extension (stance), §7.10
     duration: Positive = 0.04  # s, §7.10
     threshold: Number = 0.5  # GB "rising through 0.5", §7.10
+    refractory: NonNegative = 0.0  # s: no second reset of this entry within it (chosen here; not in the thesis)
+    after: NonNegative = 0.0  # s of trial time: no reset before it (chosen here; not in the thesis)
+    joints: list[Name] | None = None  # the RGs a state reset sets; None = [joint]
+    state: dict[Name, CellState] = {}  # joint -> its stance-onset state; needed for every joint of `joints` (state)
     enabled: bool = True
+
+    @property
+    def state_joints(self) -> list[str]:
+        """The joints whose RGs a state reset sets."""
+        return list(self.joints) if self.joints is not None else [self.joint]
+
+    def missing_states(self) -> list[str]:
+        """Joints of ``state_joints`` without a stored state (a state reset needs none missing)."""
+        return [name for name in self.state_joints if name not in self.state]
 
 
 class Switch(Strict):
-    """Pattern switching (digest §7.11): new (sigma_s, sigma_f) for the named joints, V = q = 0, theta_0 := the
-    measured angle (or, with ``theta0: continuous``, the value that keeps the command at that angle), then a kick
-    of ``kick`` (into RG-F; RG-E gets its negative) for ``kick_duration`` s.
+    """Pattern switching (digest §7.11): new (sigma_s, sigma_f) for the named joints, V = q = 0, a position command
+    that goes on from the measured angle (``theta0``, below), then a kick of ``kick`` (into RG-F; RG-E gets its
+    negative) for ``kick_duration`` s, its sign as given or by the joint's motion (``kick_direction``).
 
     Triggered once: at time ``at`` (s), or when the input ``input`` exceeds ``above`` (a level), or when its rate of
     change exceeds ``rate_above`` (per s; the push detector of §7.11, e.g. the torso's pitch rate). ``joint_kicks``
@@ -166,10 +207,22 @@ class Switch(Strict):
     kick_duration: Positive = 0.2  # s, §7.11 / §5 (the author's later scripts)
     joint_kicks: dict[Name, Number] = {}
     inhibit: list[Annotated[list[Name], Field(min_length=2, max_length=2)]] = []
-    # "angle": theta_0 := the measured angle (§7.11, the author's method). "continuous": chosen here, not in the thesis:
-    # theta_0 := angle - G (MN_E - MN_F) at the end of the switch's tick, so the command equals the measured angle and
-    # does not jump by the offset the joint's reflexes held (E4.7, docs/results/chapter4/humanoid.md)
-    theta0: Literal["angle", "continuous"] = "angle"
+    # A position-commanded joint's theta_0 at the switch. "continuous" (the default): theta_0 := angle - G (MN_E - MN_F)
+    # with the switch tick's MN, so the command equals the measured angle: the joint goes on from where it is. The
+    # thesis switches the RG/PF patterns (L1284-1324, L1430-1437) and says nothing of the command's offset; this
+    # changes nothing else. "angle": theta_0 := the measured angle. That rule is not the thesis's: it comes from the
+    # author's later (2017) scripts (digest §5, last bullet), whose circuit has its reflexes off; in a circuit with
+    # reflexes G (MN_E - MN_F) is not 0 at the switch, and the command jumps by that offset (E4.7,
+    # docs/results/chapter4/humanoid.md).
+    theta0: Literal["angle", "continuous"] = "continuous"
+    # "fixed": each joint's kick as given. "motion" (issue 23's reading of E4.4: each joint kicked in the direction it
+    # is moving; "the direction of the switching in each joint is related to the direction of the injected current",
+    # L1437): its magnitude as given, its sign such that the RG pushes the joint further the way it moves at the switch
+    # (the rate of its angle_input over the last tick; the given sign when it does not move or on the trial's first
+    # tick)
+    kick_direction: Literal["fixed", "motion"] = "fixed"
+    name: Name | None = None  # a label, shown in the switch's event (the controller names its presets so)
+    armed: bool = True  # armed at a trial's start (a controller's presets are not: it arms the one a trial chooses)
 
 
 class Circuit(Strict):
@@ -192,9 +245,26 @@ class Circuit(Strict):
     kicks: list[Kick] = []
     phase_resets: list[PhaseReset] = []
     switches: list[Switch] = []
+    # position circuits (issue 23 item 2, slope-aware starts): at a trial's first tick these joints' theta_0 := their
+    # measured angle - G (MN_E - MN_F) with that tick's MN (as a continuous switch), so that their command equals the
+    # pose the body starts in (e.g. the humanoid's ankles, pitched by a ramp). Chosen here, not in the thesis.
+    start_from_pose: list[Name] = []
 
     def joint_index(self, name: str) -> int:
         return [j.name for j in self.joints].index(name)
+
+    def state_reset_problem(self) -> str:
+        """Why the phase resets cannot all act as state resets (entries without a stance-onset state for each of
+        their joints), or "" when they can (``phase_reset: state``)."""
+        lacking = [
+            f"phase_resets.{i} {r.missing_states()}" for i, r in enumerate(self.phase_resets) if r.missing_states()
+        ]
+        if not lacking:
+            return ""
+        return (
+            f"expected a stance-onset state for every joint of every phase reset of circuit {self.name} ('state'); "
+            f"none for {', '.join(lacking)}"
+        )
 
     def neuron_index(self, ref: str) -> int:
         """Index of ``joint.E`` / ``joint.F`` in the network's neuron vector (2 j for E, 2 j + 1 for F)."""
@@ -210,14 +280,17 @@ class Circuit(Strict):
 def _fields_at(loc: tuple) -> list[str]:
     """Valid keys at ``loc`` in a circuit (list indices and dict keys skipped), for did-you-mean."""
     model: Any = Circuit
+    mapping_key = False  # the next part is a key of a dict field (a joint's name), not a field
     for part in loc:
         if not (isinstance(model, type) and issubclass(model, BaseModel)):
             return []
-        if isinstance(part, int):
+        if isinstance(part, int) or mapping_key:
+            mapping_key = False
             continue
         field = model.model_fields.get(str(part))
         if field is None:
             return []
+        mapping_key = typing.get_origin(field.annotation) is dict
         model = _inner_model(field.annotation)
         if model is None:
             return []
@@ -258,11 +331,11 @@ def _reference_problems(c: Circuit) -> list[Problem]:
         if given is not None and given not in valid:
             out.append(Problem(path, f"expected one of the {what} {valid}; got {given!r}", nearest(given, valid)))
 
-    def unique(path: str, names: list[str]) -> None:
+    def unique(path: str, names: list[str], key: str = ".name") -> None:
         seen = set()
         for i, n in enumerate(names):
             if n in seen:
-                out.append(Problem(f"{path}.{i}.name", f"expected a unique name; got {n!r} twice"))
+                out.append(Problem(f"{path}.{i}{key}", f"expected a unique name; got {n!r} twice"))
             seen.add(n)
 
     unique("joints", joints)
@@ -286,6 +359,20 @@ def _reference_problems(c: Circuit) -> list[Problem]:
     for i, r in enumerate(c.phase_resets):
         need(f"phase_resets.{i}.sensor", r.sensor, sensors, "sensory neurons")
         need(f"phase_resets.{i}.joint", r.joint, joints, "joints")
+        for n, name in enumerate(r.joints or ()):
+            need(f"phase_resets.{i}.joints.{n}", name, joints, "joints")
+        unique(f"phase_resets.{i}.joints", r.joints or [], key="")
+        for name in r.state:
+            need(f"phase_resets.{i}.state.{name}", name, r.state_joints, "joints this reset sets")
+        if r.mode == "state":
+            for name in (name for name in r.missing_states() if name in joints):
+                out.append(
+                    Problem(
+                        f"phase_resets.{i}.state.{name}",
+                        "expected the stance-onset state {E: [V, q], F: [V, q]} of every joint in `joints` "
+                        "(mode: state); got none",
+                    )
+                )
     for i, s in enumerate(c.switches):
         for name in s.joints:
             need(f"switches.{i}.joints.{name}", name, joints, "joints")
@@ -305,6 +392,25 @@ def _reference_problems(c: Circuit) -> list[Problem]:
                 )
         elif levels:
             out.append(Problem(f"switches.{i}.{levels[0]}", "expected only with `input`"))
+        if s.kick_direction == "motion":
+            for name in s.joints:
+                if name in joints and c.joints[joints.index(name)].angle_input is None:
+                    out.append(
+                        Problem(
+                            f"switches.{i}.joints.{name}",
+                            f"expected a joint with an `angle_input` (kick_direction: motion reads its rate); {name!r} "
+                            "has none",
+                        )
+                    )
+    for n, name in enumerate(c.start_from_pose):
+        path = f"start_from_pose.{n}"
+        if c.command != "position":
+            out.append(Problem(path, f"expected no joints for a {c.command} command (position circuits only)"))
+            break
+        need(path, name, joints, "joints")
+        if name in joints and c.joints[joints.index(name)].angle_input is None:
+            out.append(Problem(path, f"expected a joint with an `angle_input` (its measured pose); {name!r} has none"))
+    unique("start_from_pose", list(c.start_from_pose), key="")
     return out
 
 

@@ -30,10 +30,17 @@ Choices where the thesis is silent (CPG-HUMANOID.md, "the digest", §7), followe
 - §7.6: theta_MLR enters with opposite signs: theta_eff = theta - theta_MLR on PF-E and theta + theta_MLR
   on PF-F, so +0.5 is extensor domination (L1160).
 - §7.7: alpha_MLR literally as in (4.9): the PF slope is alpha * alpha_MLR.
-- §7.10: phase resetting = a pulse (default -1 into RG-F, +1 into RG-E, 40 ms) into a joint's RG when a
-  sensory neuron (heel contact GB) rises through 0.5; switchable.
-- §7.11: pattern switching = new (sigma_s, sigma_f), V = q = 0, theta_0 := the measured angle, then a
-  kick of +I (F) / -I (E) for 0.2 s.
+- §7.10: phase resetting (L1270-1282: "the rhythmic neurons were driven by ground contact force sensors") when a
+  sensory neuron (heel contact GB) rises through 0.5, once per landing (a refractory time, none during the start-up
+  transient): either a pulse (default -1 into RG-F, +1 into RG-E, 40 ms) into a joint's RG, or (``mode: state``,
+  §7.10's alternative) a jump of a leg's RGs to a stored stance-onset state (V, q) measured on the unperturbed gait
+  (``calibrate.py``); switchable per trial (``set_phase_reset``).
+- §7.11: pattern switching = new (sigma_s, sigma_f), V = q = 0, then a kick of +I (F) / -I (E) for 0.2 s. A
+  position-commanded joint's theta_0 is set so that its command stays at the measured angle (``theta0:
+  continuous``, the default: the joint goes on from where it is). The author's later (2017) scripts set theta_0 :=
+  the measured angle instead (digest §5, last bullet; ``theta0: angle``): their circuit has its reflexes off, and in
+  ours, whose reflexes hold MN_E - MN_F away from 0, that makes the command jump by the reflexes' offset. A kick's
+  sign is given, or (``kick_direction: motion``, issue 23's E4.4) follows the way the joint moves.
 
 What is continuous and what is sampled: the RG states (V, q) and the RG-RG synapses (a function of V)
 are integrated with RK4. The injected currents (kicks, phase-reset and switching pulses) and the sensory
@@ -47,7 +54,7 @@ initial state is V = q = 0, as in the author's code (digest §5).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -130,14 +137,67 @@ def averaged_input(main_weight, main, sensory_weights, sensory, n):
 @dataclass(frozen=True)
 class SwitchEvent:
     """A pattern switch that happened (§7.11): at ``time`` (s of CPG time, the start of the tick), the named joints
-    took ``patterns`` (sigma_s, sigma_f) with the kicks ``kicks`` (into RG-F), and the couplings between the joint
-    pairs ``inhibited`` were silenced; ``copies``: which batch copies switched."""
+    took ``patterns`` (sigma_s, sigma_f) with the kicks ``kicks`` (into RG-F: their signs are the directions used; per
+    switched copy, an array, when batch copies kicked differently), and the couplings between the joint pairs
+    ``inhibited`` were silenced; ``copies``: which batch copies switched. ``name``: the circuit switch's label (a
+    controller preset's name). ``kick_direction``: "fixed" or "motion"; with "motion", ``extension_rates`` holds each
+    joint's sign(gain) d angle / dt at the switch (rad/s, > 0: moving toward extension, so its kick was -|kick|)."""
 
     time: float
     patterns: dict[str, tuple[float, float]]
-    kicks: dict[str, float]
+    kicks: dict[str, float | np.ndarray]
     inhibited: tuple[tuple[str, str], ...]
     copies: np.ndarray
+    name: str | None = None
+    kick_direction: str = "fixed"
+    extension_rates: dict[str, float | np.ndarray] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class PhaseResetEvent:
+    """A phase reset that happened (§7.10): at ``time`` (s, the start of the tick), the circuit's ``phase_resets``
+    entry ``entry`` acted as ``mode`` ("pulse" or "state") in the batch copies ``copies``."""
+
+    time: float
+    entry: int
+    mode: str
+    copies: np.ndarray
+
+
+class ResetTrigger:
+    """When phase resets fire (§7.10), one column per ``phase_resets`` entry: its sensory neuron rising through
+    ``threshold`` (below it last tick, at or above it now), once per landing: not within ``refractory`` s of that
+    entry's last firing (a heel bouncing), not before ``after`` s of trial time (the start-up transient). The network
+    and ``calibrate.py`` (which records the gait's state at these instants) share it: the same rule for both."""
+
+    def __init__(self, threshold, refractory, after, batch: int) -> None:
+        self.threshold = np.asarray(threshold, dtype=float)
+        self.refractory = np.asarray(refractory, dtype=float)
+        self.after = np.asarray(after, dtype=float)
+        self.batch = batch
+        self._gated = bool(np.any(self.refractory > 0) or np.any(self.after > 0))  # else a bare rising edge
+        self.reset()
+
+    def reset(self) -> None:
+        self._previous: np.ndarray | None = None  # which sensors were at or above threshold last tick
+        self._last = np.full((self.batch, len(self.threshold)), -np.inf)  # s: each entry's last firing
+
+    def __call__(self, rho: np.ndarray, time: float, enabled=True) -> np.ndarray | None:
+        """``rho``: (batch, entries), the sensory neurons of this tick; ``time``: s, the tick's start. Which entries
+        fire, (batch, entries) booleans, or None when none does (the common case, kept cheap)."""
+        above = rho >= self.threshold
+        previous, self._previous = self._previous, above
+        if previous is None:
+            return None
+        rising = above & ~previous & enabled
+        if not rising.any():
+            return None
+        if self._gated:
+            rising &= (time >= self.after - 1e-9) & (time - self._last >= self.refractory - 1e-9)
+            if not rising.any():
+                return None
+            self._last[rising] = time
+        return rising
 
 
 class CPGNetwork:
@@ -204,12 +264,32 @@ class CPGNetwork:
             (np.array([circuit.joint_index(name) for name in k.joints]), k.start, k.duration, k.amplitude)
             for k in circuit.kicks
         ]
+        resets = circuit.phase_resets
         self._resets = [
             (self.sensor_names.index(r.sensor), circuit.joint_index(r.joint), r.amplitude, r.duration, r.threshold)
-            for r in circuit.phase_resets
+            for r in resets
         ]
         self._reset_arrays = tuple(np.array(column) for column in zip(*self._resets, strict=True))
+        self._reset_trigger = ResetTrigger(
+            [r.threshold for r in resets], [r.refractory for r in resets], [r.after for r in resets], self.batch
+        )
+        # a state reset's target per entry: the RG columns of its joints [E, F, E, F, ...] and their V and q
+        # (None: the entry stores no complete state, so it can act as a pulse only)
+        self._reset_states: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] = []
+        for r in resets:
+            if r.missing_states():
+                self._reset_states.append(None)
+                continue
+            names = r.state_joints
+            cols = np.array([2 * circuit.joint_index(name) + side for name in names for side in (E, F)])
+            V = np.array([cell[0] for name in names for cell in (r.state[name].E, r.state[name].F)])
+            q = np.array([cell[1] for name in names for cell in (r.state[name].E, r.state[name].F)])
+            self._reset_states.append((cols, V, q))
         self._switch_input = [None if s.input is None else circuit.inputs.index(s.input) for s in circuit.switches]
+        self._start_from_pose = [
+            (circuit.joint_index(name), circuit.inputs.index(circuit.joints[circuit.joint_index(name)].angle_input))
+            for name in circuit.start_from_pose
+        ]
 
         # buffers of the RK4 hot path (_integrate): a stage's input z = [V, q, tanh(sigma_f V / A_f), tanh(V / A_f)]
         # per copy; the state y = [V, q] is the first half of stage 1's buffer, so stage 1 reads it in place
@@ -282,6 +362,7 @@ class CPGNetwork:
         theta_mlr = per_neuron(lambda j: j.pf.theta_mlr)
         self.theta_mlr_signed = theta_mlr * np.tile([-1.0, 1.0], self.n_joints)  # §7.6: -theta_MLR on E, + on F
         self.phase_reset_enabled = np.array([r.enabled for r in self.circuit.phase_resets], dtype=bool)
+        self.phase_reset_as_state = np.array([r.mode == "state" for r in self.circuit.phase_resets], dtype=bool)
         self.theta0 = np.tile([j.theta0 for j in joints], (b, 1))
         self.coupling = self._circuit_coupling.copy()
         self._update_coefficients()
@@ -321,6 +402,32 @@ class CPGNetwork:
                 self.coupling[2 * one : 2 * one + 2, 2 * other : 2 * other + 2] = 0.0
         self._update_coefficients()
 
+    #: what ``set_phase_reset`` takes
+    PHASE_RESET_MODES = ("off", "pulse", "state", "circuit")
+
+    def set_phase_reset(self, mode: str) -> None:
+        """How the circuit's phase resets act until the next ``reset`` (which restores "circuit"): "off" (none),
+        "pulse" or "state" (every entry acts so, each still as its ``enabled``), "circuit" (each as its file says). A
+        state reset needs every entry to store a state for each of its joints (ValueError naming those that do not)."""
+        if mode not in self.PHASE_RESET_MODES:
+            raise ValueError(f"phase_reset: expected one of {list(self.PHASE_RESET_MODES)}; got {mode!r}")
+        resets = self.circuit.phase_resets
+        problem = self.circuit.state_reset_problem() if mode == "state" else ""
+        if problem:
+            raise ValueError(f"phase_reset: {problem}")
+        self.phase_reset_enabled = np.array([r.enabled and mode != "off" for r in resets], dtype=bool)
+        as_state = [r.mode == "state" if mode == "circuit" else mode == "state" for r in resets]
+        self.phase_reset_as_state = np.array(as_state, dtype=bool)
+
+    def arm_switches(self, indices) -> None:
+        """Arm only the circuit's switches ``indices`` (of ``circuit.switches``) for this trial (``reset`` arms those
+        marked ``armed`` again): how a controller chooses one of its presets per trial, or none."""
+        chosen = sorted({int(i) for i in indices})
+        for i in chosen:
+            if not 0 <= i < len(self.circuit.switches):
+                raise ValueError(f"switch index {i}: expected one below {len(self.circuit.switches)}")
+        self._pending_switches = [i for i in chosen if not self._switched[:, i].all()]
+
     def _joint_indices(self, joints: list[str] | None) -> np.ndarray:
         if joints is None:
             return np.arange(self.n_joints)
@@ -339,11 +446,14 @@ class CPGNetwork:
         self._pulse_amplitude = np.zeros((b, self.n_joints))
         self._pulse_remaining = np.zeros((b, self.n_joints))
         self._pulsing = False  # some pulse has time left
-        self._previous_above = None  # which phase-reset sensors were at or above threshold last tick
+        self._reset_trigger.reset()
+        #: the phase resets so far (§7.10), in order
+        self.phase_reset_events: list[PhaseResetEvent] = []
         self._previous_phi = None
         self._switched = np.zeros((b, len(self.circuit.switches)), dtype=bool)
-        self._hold_at_switch: list[tuple[np.ndarray, int, np.ndarray]] = []  # (copies, joint, angle): continuous
-        self._pending_switches = list(range(len(self.circuit.switches)))
+        # (copies, joint, angle) whose theta_0 is set at the end of the tick: continuous switches, start_from_pose
+        self._hold_at_switch: list[tuple[np.ndarray, int, np.ndarray]] = []
+        self._pending_switches = [i for i, s in enumerate(self.circuit.switches) if s.armed]
         #: the pattern switches so far (§7.11), in order
         self.switch_events: list[SwitchEvent] = []
         ns = len(self.sensor_names)
@@ -445,6 +555,9 @@ class CPGNetwork:
         else:
             phi[...] = sensors
         rho = _logistic(self._sensor_half_alpha, phi[:, self._sensor_input] - self._sensor_theta)  # (4.13) L1133
+        if self.tick == 0 and self._start_from_pose:  # circuit start_from_pose: the command starts at the pose
+            every = np.ones(self.batch, dtype=bool)
+            self._hold_at_switch.extend((every, j, phi[:, source].copy()) for j, source in self._start_from_pose)
         self._phase_resets(rho)
         if self._pending_switches:
             self._switches(phi, control_dt)
@@ -497,22 +610,28 @@ class CPGNetwork:
         return constant
 
     def _phase_resets(self, rho: np.ndarray) -> None:
-        """§7.10: a sensory neuron rising through its threshold (below it last tick, at or above it now) starts a pulse
-        into its joint's RG."""
+        """§7.10 (L1270-1282): a sensory neuron rising through its threshold (``ResetTrigger``: once per landing, not
+        in the start-up transient) starts a pulse into its joint's RG, or sets its joints' RGs to the stance-onset
+        state (V, q) the entry stores (``phase_reset_as_state``): a reset of the phase, wherever the rhythm was."""
         if not self._resets:
             return
-        sensor, joint, amplitude, duration, threshold = self._reset_arrays
-        above = rho[:, sensor] >= threshold
-        previous, self._previous_above = self._previous_above, above
-        if previous is None:
+        sensor, joint, amplitude, duration, _ = self._reset_arrays
+        fired = self._reset_trigger(rho[:, sensor], self.time, self.phase_reset_enabled)
+        if fired is None:
             return
-        rising = above & ~previous & self.phase_reset_enabled
-        if not rising.any():
-            return
-        for copy, n in zip(*np.nonzero(rising), strict=True):
-            self._pulse_amplitude[copy, joint[n]] = amplitude[n]
-            self._pulse_remaining[copy, joint[n]] = duration[n]
-            self._pulsing = True
+        for n in np.flatnonzero(fired.any(axis=0)):
+            copies = fired[:, n]
+            if self.phase_reset_as_state[n]:
+                cols, V, q = self._reset_states[n]
+                rows = np.flatnonzero(copies)[:, None]
+                self.y[rows, 0, cols] = V
+                self.y[rows, 1, cols] = q
+            else:
+                self._pulse_amplitude[copies, joint[n]] = amplitude[n]
+                self._pulse_remaining[copies, joint[n]] = duration[n]
+                self._pulsing = True
+            mode = "state" if self.phase_reset_as_state[n] else "pulse"
+            self.phase_reset_events.append(PhaseResetEvent(self.time, int(n), mode, copies.copy()))
 
     def _hold_commands(self) -> None:
         """A continuous switch's last part: theta_0 := angle - G (MN_E - MN_F) with this tick's MN, so that the command
@@ -541,6 +660,9 @@ class CPGNetwork:
                 self._switched[due, n] = True
                 patterns = {name: (rg.sigma_s, rg.sigma_f) for name, rg in s.joints.items()}
                 kicks = {name: s.joint_kicks.get(name, s.kick) for name in s.joints}
+                rates = {}
+                if s.kick_direction == "motion":
+                    kicks, rates = self._kicks_by_motion(kicks, phi, control_dt)
                 self.switch_pattern(
                     patterns,
                     kick=kicks,
@@ -549,10 +671,32 @@ class CPGNetwork:
                     where=due,
                     inhibit=s.inhibit,
                     continuous=s.theta0 == "continuous",
+                    name=s.name,
+                    extension_rates=rates,
                 )
                 if self._switched[:, n].all():
                     self._pending_switches.remove(n)
         self._previous_phi = phi.copy()
+
+    def _kicks_by_motion(self, kicks: dict[str, float], phi: np.ndarray, control_dt: float) -> tuple[dict, dict]:
+        """``kick_direction: motion`` (issue 23's reading of E4.4: each joint kicked in the direction it is moving; the
+        switch's direction is the injected current's, L1437): each joint's kick keeps its magnitude, its sign pushes
+        the joint further the way it moves. Its rate toward extension is sign(G) d angle / dt over the last
+        tick (G > 0 where + rotation is extension; the angle_input's change over ``control_dt``); a kick of +I goes
+        into RG-F (§5's convention), so a joint moving toward extension gets -|kick|, one moving toward flexion
+        +|kick|, one not moving (or on the trial's first tick, no rate yet) its kick as given. Returns the kicks per
+        batch copy and the rates."""
+        out, rates = {}, {}
+        for name, kick in kicks.items():
+            j = self.circuit.joint_index(name)
+            source = self._angle_input[j]
+            if self._previous_phi is None:
+                rate = np.zeros(self.batch)
+            else:
+                rate = np.sign(self.gain[j]) * (phi[:, source] - self._previous_phi[:, source]) / control_dt
+            out[name] = np.where(rate > 0, -abs(kick), np.where(rate < 0, abs(kick), kick))
+            rates[name] = rate
+        return out, rates
 
     def switch_pattern(
         self,
@@ -562,29 +706,35 @@ class CPGNetwork:
         sensors=None,
         where=None,
         inhibit=(),
-        continuous: bool = False,
+        continuous: bool = True,
+        name: str | None = None,
+        extension_rates: dict | None = None,
     ) -> None:
-        """§7.11 (the author's later method, digest §5): set each named joint's (sigma_s, sigma_f), reset its
-        V = q = 0, set theta_0 := its measured angle (position command, if the joint names ``angle_input``
-        and ``sensors`` are given), and inject +kick into RG-F / -kick into RG-E for ``duration`` s; ``kick`` is one
-        number or one per joint (its sign the direction of that joint's switch, L1437). ``inhibit``: joint pairs
-        whose couplings are silenced (L1311; all copies, so ``where`` must then select all or none).
-        ``where``: boolean mask of the batch copies to switch (default all). ``continuous`` (chosen here, not in the
-        thesis): at the end of this tick theta_0 := angle - G (MN_E - MN_F) instead, so the position command equals the
-        measured angle and does not jump by the offset the joint's reflexes held. Recorded in ``switch_events``."""
+        """§7.11: set each named joint's (sigma_s, sigma_f), reset its V = q = 0 (the author's later method, digest
+        §5), and inject +kick into RG-F / -kick into RG-E for ``duration`` s; ``kick`` is one number or one per joint
+        (its sign the direction of that joint's switch, L1437; a joint's value may be an array over the batch copies).
+        ``inhibit``: joint pairs whose couplings are silenced (L1311; all copies, so ``where`` must then select all or
+        none). ``where``: boolean mask of the batch copies to switch (default all).
+
+        A position-commanded joint's theta_0 (if it names ``angle_input`` and ``sensors`` are given): ``continuous``
+        (the default) sets theta_0 := angle - G (MN_E - MN_F) at the end of this tick, so the command equals the
+        measured angle (the joint goes on from where it is); ``continuous=False`` sets theta_0 := the measured angle,
+        the rule of the author's 2017 scripts (digest §5, last bullet; not the thesis's), whose circuit has its
+        reflexes off: here the command then jumps by the offset the joint's reflexes held. Recorded in
+        ``switch_events`` (with ``name`` and the ``extension_rates`` a motion-directed kick used)."""
         mask = np.ones(self.batch, dtype=bool) if where is None else np.asarray(where, dtype=bool)
         kicks = kick if isinstance(kick, dict) else dict.fromkeys(patterns, kick)
         if inhibit and not mask.all():
             raise ValueError("inhibiting couplings in some batch copies only: the copies share one coupling matrix")
-        for name, (sigma_s, sigma_f) in patterns.items():
-            j = self.circuit.joint_index(name)
+        for joint, (sigma_s, sigma_f) in patterns.items():
+            j = self.circuit.joint_index(joint)
             cols = [2 * j + E, 2 * j + F]
             for array, value in ((self.sigma_s, sigma_s), (self.sigma_f, sigma_f)):
                 array[np.ix_(mask, cols)] = value
             self.sigma_in[np.ix_(mask, cols)] = sigma_s
             self.sigma_out[np.ix_(mask, cols)] = sigma_s
             self.y[np.ix_(mask, [0, 1], cols)] = 0.0
-            self._pulse_amplitude[mask, j] = kicks.get(name, 0.0)
+            self._pulse_amplitude[mask, j] = np.broadcast_to(kicks.get(joint, 0.0), (self.batch,))[mask]
             self._pulse_remaining[mask, j] = duration
             self._pulsing = True
             source = self._angle_input[j]
@@ -597,13 +747,22 @@ class CPGNetwork:
             self.inhibit_couplings(inhibit)
         else:
             self._update_coefficients()
+
+        def per_copy(value) -> float | np.ndarray:  # one number, or the switched copies' when they differ
+            switched = np.broadcast_to(np.asarray(value, dtype=float), (self.batch,))[mask]
+            return float(switched[0]) if np.all(switched == switched[0]) else switched.copy()
+
+        rates = extension_rates or {}
         self.switch_events.append(
             SwitchEvent(
                 time=self.time,
-                patterns={name: (float(s), float(f)) for name, (s, f) in patterns.items()},
-                kicks={name: float(kicks.get(name, 0.0)) for name in patterns},
+                patterns={joint: (float(s), float(f)) for joint, (s, f) in patterns.items()},
+                kicks={joint: per_copy(kicks.get(joint, 0.0)) for joint in patterns},
                 inhibited=tuple(tuple(pair) for pair in inhibit),
                 copies=mask.copy(),
+                name=name,
+                kick_direction="motion" if rates else "fixed",
+                extension_rates={joint: per_copy(rate) for joint, rate in rates.items()},
             )
         )
 

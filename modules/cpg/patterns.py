@@ -110,7 +110,8 @@ def one_joint_circuit(
     """A single joint, no sensors, position command theta = gain (MN_E - MN_F), kicked at t = 0 with +1 into RG-F
     (-1 into RG-E) for 80 ms (digest §1.7). ``rg_mutual`` = 0 makes E and F two independent mirror cells (the
     digest's single-cell reference); Table 4.1's -1 couples them. ``w_rg2pf`` = 0.2 gives the PF input of an ankle
-    pitch PF (RG / (n + 1) with n = 4 silent sensors, (4.10)). ``pf_input``: what the PF reads of the RG (circuit.py)."""
+    pitch PF (RG / (n + 1) with n = 4 silent sensors, (4.10)). ``pf_input``: what the PF reads of the RG
+    (circuit.py)."""
     return validate_circuit(
         {
             "name": "one_joint",
