@@ -425,7 +425,11 @@ def run_conditions(c: Conductor) -> dict:
 
     def request(trial_id: int, case: Case) -> m.TrialRequest:
         params = {"body": dict(base["body"]), "controller": dict(base["controller"])}
-        for key, value in {**proto.conditions[case.condition], **case.point}.items():
+        given = {**proto.conditions[case.condition], **case.point}
+        for target, source in proto.follow.items():  # a parameter that takes another's value (follow)
+            if source in given:
+                given[target] = given[source]
+        for key, value in given.items():
             owner, _, param = key.partition(".")
             params[owner][param] = value
         return m.TrialRequest(

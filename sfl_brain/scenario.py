@@ -166,9 +166,17 @@ class ConditionsProtocol(Strict):
         [], max_length=8, description="grid keys sfl report pools over in its summary (e.g. body.push_phase)"
     )
     metrics: list[str] = Field(
-        [], max_length=16, description="body metrics (or `quality`) sfl report summarises per condition (mean and spread)"
+        [],
+        max_length=16,
+        description="body metrics (or `quality`) sfl report summarises per condition (mean and spread)",
     )
     analyses: list[Analysis] = Field([], max_length=8, description="what sfl report draws from the recording")
+    follow: dict[str, str] = Field(
+        {},
+        max_length=16,
+        description="trial parameter -> the grid or condition key whose value it takes in every trial (e.g. "
+        "controller.switch_at: body.push_time, a switch at the push)",
+    )
 
     @property
     def trials(self) -> int:
@@ -207,6 +215,18 @@ def conditions_problems(proto: ConditionsProtocol) -> list[Problem]:
                     nearest(key, list(proto.grid)),
                 )
             )
+    given = set(proto.grid) | {k for values in proto.conditions.values() for k in values}
+    for target, source in proto.follow.items():
+        if source not in given:
+            out.append(
+                Problem(
+                    f"protocol.follow.{target}",
+                    f"expected a key of the grid or of a condition {sorted(given)}; got {source!r}",
+                    nearest(source, sorted(given)),
+                )
+            )
+        if target in given:
+            out.append(Problem(f"protocol.follow.{target}", "is set by the grid or a condition already"))
     if proto.trials > MAX_CONDITION_TRIALS:
         out.append(
             Problem(
@@ -1081,6 +1101,11 @@ def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
         for name, values in proto.conditions.items():
             targets += [(f"protocol.conditions.{name}.{k}", k, (v,)) for k, v in values.items()]
         targets += [(f"protocol.grid.{k}", k, tuple(v)) for k, v in proto.grid.items()]
+        values_of: dict[str, list] = {k: list(vs) for k, vs in proto.grid.items()}
+        for values in proto.conditions.values():
+            for k, v in values.items():
+                values_of.setdefault(k, []).append(v)
+        targets += [(f"protocol.follow.{t}", t, tuple(values_of[s])) for t, s in proto.follow.items() if s in values_of]
     module_params = {
         owner: (classes[name][0].Params.model_validate(classes[name][2]) if name else None)
         for owner, name in (("body", body_name), ("controller", controller_name))

@@ -156,3 +156,36 @@ def test_judge_upright_needs_a_body_that_reports_falls(tmp_path, write_scenario)
     assert "protocol.judge is 'upright' but the body reports no metric `fell`" in done.stdout + done.stderr
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert summary["status"] == "failed"
+
+
+def test_follow_gives_a_parameter_another_ones_value_and_is_checked(write_scenario):
+    text = """
+name: push_switch
+protocol:
+  kind: conditions
+  conditions: {walk: {controller.switch: none}, switch: {controller.switch: brace}}
+  grid: {body.push_time: [4.0, 4.5]}
+  follow: {controller.switch_at: body.push_time}
+modules:
+  controller:
+    impl: cpg
+    params:
+      switches:
+        brace: {trigger: time, at: 5.0, joints: {hip_l: plateau, hip_r: plateau}}
+  body: {impl: planar_8link}
+"""
+    plan = sc.build_plan(sc.yaml.safe_load(text), "push.yaml", SCENARIOS)
+    assert plan.scenario.protocol.follow == {"controller.switch_at": "body.push_time"}
+    bad = text.replace(
+        "follow: {controller.switch_at: body.push_time}", "follow: {controller.switch_at: body.push_tim}"
+    )
+    done = sfl("check", str(write_scenario(bad)))
+    assert done.returncode == 2
+    assert "protocol.follow.controller.switch_at: expected a key of the grid or of a condition" in done.stderr
+    assert "(did you mean `body.push_time`?)" in done.stderr
+    # a preset the controller does not have is refused by sfl check, naming the presets it has
+    done = sfl("check", str(write_scenario(text.replace("controller.switch: brace}", "controller.switch: bracee}"))))
+    assert done.returncode == 2
+    assert """switch: expected "none" or one of the presets ['brace']; got 'bracee' (did you mean 'brace'?)""" in (
+        done.stderr
+    )

@@ -157,3 +157,14 @@ def test_the_circuit_files_own_switches_stay_armed_unless_a_trial_says_none():
     assert run(controller, {})[1] == [(0.1, None, ["knee_l"])]
     assert run(controller, {"switch": "hips"})[1] == [(0.5, "hips", ["hip_l", "hip_r"])]  # the chosen preset only
     assert run(controller, {"switch": "none"})[1] == []
+
+
+def test_a_trial_moves_the_armed_switch_to_its_own_time_and_the_next_trial_starts_from_the_preset():
+    controller = CPGController(CPGParams(switches=PRESETS))
+    assert "switch_at" in TRIAL_PARAMS
+    assert run(controller, {"switch": "hips", "switch_at": 1.0})[1] == [(1.0, "hips", ["hip_l", "hip_r"])]
+    assert run(controller, {"switch": "hips"})[1] == [(0.5, "hips", ["hip_l", "hip_r"])]
+    assert run(controller, {"switch": "none", "switch_at": 1.0})[1] == []
+    for bad in (-1.0, "soon", True, float("nan")):
+        with pytest.raises(ValueError, match="switch_at: expected a time in s >= 0"):
+            CPGController.check_trial_param("switch_at", bad)

@@ -162,7 +162,8 @@ def test_cli_check_exits_2_without_traceback(write_scenario):
     assert done.returncode == 2
     assert "Traceback" not in done.stderr
     assert (
-        "protocol.kind: expected one of 'learn', 'sweep', 'exploit', 'conditions'; got 'lern' (did you mean `learn`?)" in done.stderr
+        "protocol.kind: expected one of 'learn', 'sweep', 'exploit', 'conditions'; got 'lern' (did you mean `learn`?)"
+        in done.stderr
     )
 
 

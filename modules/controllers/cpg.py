@@ -40,7 +40,8 @@ reset per trial.
   descending control ``alpha_mlr``, ``theta_mlr`` of (4.9) (E4.6 L1417-1426), on the same joints; ``phase_reset``
   ("off", "pulse", "state", "circuit"; default: the parameter ``phase_reset``); ``switch`` ("none": no pattern switch
   at all this trial, not even the circuit file's own; a preset's name: that preset only; default: the circuit's own
-  switches and the parameter ``switch``).
+  switches and the parameter ``switch``); ``switch_at`` (s: the armed time-triggered switch fires at this time
+  instead of its ``at``, so a protocol can put the switch where its push is: the conditions protocol's ``follow``).
 
 On logged trials every neuron is shown on ``sim_time``: per joint and side (E, F) RG V and q, PF and MN, then the
 sensory neurons (``CPGNetwork.neuron_names``).
@@ -66,7 +67,7 @@ from sfl_brain.scenario import ScenarioError
 from sfl_brain.telemetry import Event
 
 #: what a trial may set (see the module docstring)
-TRIAL_PARAMS = ("sigma_s", "sigma_f", "alpha_mlr", "theta_mlr", "phase_reset", "switch")
+TRIAL_PARAMS = ("sigma_s", "sigma_f", "alpha_mlr", "theta_mlr", "phase_reset", "switch", "switch_at")
 #: how the circuit's phase resets act (``phase_reset``, module and trial parameter)
 PHASE_RESET_MODES = CPGNetwork.PHASE_RESET_MODES
 
@@ -340,6 +341,8 @@ class CPGController(Controller):
         choice = params.get("switch")  # §7.11, E4.4: None = the circuit's switches and the parameter `switch`
         if choice is not None:
             network.arm_switches([] if choice == "none" else [self.preset_index[choice]])
+        if "switch_at" in params:  # the armed switch's time trigger, moved to this trial's time (e.g. its push)
+            network.set_switch_time(float(params["switch_at"]))
 
     def step(self, sensors: np.ndarray) -> np.ndarray:
         self.network.advance(sensors, self._control_dt, self.params.substeps)
@@ -368,6 +371,10 @@ def _check_trial_value(name: str, value, circuit: Circuit | None, presets: list[
         lacking = circuit.state_reset_problem() if circuit is not None and value == "state" else ""
         if lacking:
             raise ValueError(f"phase_reset: {lacking}")
+        return
+    if name == "switch_at":
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or value < 0:
+            raise ValueError(f"switch_at: expected a time in s >= 0; got {value!r}")
         return
     if name == "switch":
         if not isinstance(value, str):

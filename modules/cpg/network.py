@@ -428,6 +428,13 @@ class CPGNetwork:
                 raise ValueError(f"switch index {i}: expected one below {len(self.circuit.switches)}")
         self._pending_switches = [i for i in chosen if not self._switched[:, i].all()]
 
+    def set_switch_time(self, at: float) -> None:
+        """Fire this trial's armed time-triggered switches at ``at`` s instead of their ``at`` (``reset`` restores it):
+        how a trial puts a switch where its push is (E4.4, E4.7)."""
+        for n in self._pending_switches:
+            if self.circuit.switches[n].at is not None:
+                self._switch_at[n] = float(at)
+
     def _joint_indices(self, joints: list[str] | None) -> np.ndarray:
         if joints is None:
             return np.arange(self.n_joints)
@@ -454,6 +461,7 @@ class CPGNetwork:
         # (copies, joint, angle) whose theta_0 is set at the end of the tick: continuous switches, start_from_pose
         self._hold_at_switch: list[tuple[np.ndarray, int, np.ndarray]] = []
         self._pending_switches = [i for i, s in enumerate(self.circuit.switches) if s.armed]
+        self._switch_at: dict[int, float] = {}  # switch index -> this trial's time for its trigger `at`
         #: the pattern switches so far (§7.11), in order
         self.switch_events: list[SwitchEvent] = []
         ns = len(self.sensor_names)
@@ -648,7 +656,8 @@ class CPGNetwork:
         for n in list(self._pending_switches):
             s, i = self.circuit.switches[n], self._switch_input[n]
             if s.at is not None:
-                due = np.full(self.batch, s.at - 1e-9 <= self.time)
+                at = self._switch_at.get(n, s.at)  # a trial may move a time trigger (set_switch_time)
+                due = np.full(self.batch, at - 1e-9 <= self.time)
             elif s.rate_above is not None:
                 if self._previous_phi is None:
                     continue
