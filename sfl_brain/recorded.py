@@ -85,3 +85,18 @@ def read_events(path: Path, entities: list[str]) -> dict[str, dict[int, Events]]
             items.sort(key=lambda item: item[0])
             out[entity][trial] = Events(np.array([i[0] for i in items]), [i[1] for i in items])
     return out
+
+
+def read_labels(path: Path, entities: list[str]) -> dict[str, str]:
+    """The name each series was logged with, its unit included (``knee_l (deg)``), by entity; absent ones left out."""
+    wanted, out = set(entities), {}
+    for chunk in RrdReader(Path(path)).stream().to_chunks():
+        entity = str(chunk.entity_path).lstrip("/")
+        if not chunk.is_static or entity not in wanted:
+            continue
+        batch = chunk.to_record_batch()
+        if "SeriesLines:names" in batch.schema.names:
+            names = batch.column("SeriesLines:names").to_pylist()
+            if names and names[0]:
+                out[entity] = str(names[0][0])
+    return out

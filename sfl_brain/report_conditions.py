@@ -32,7 +32,7 @@ import numpy as np  # noqa: E402
 from scipy import stats  # noqa: E402
 
 from . import poincare  # noqa: E402
-from .recorded import read_events, read_series  # noqa: E402
+from .recorded import read_events, read_labels, read_series  # noqa: E402
 from .records import read_records  # noqa: E402
 
 CONFIDENCE = 0.95
@@ -366,9 +366,11 @@ def trace_section(t: Trials, run_dirs: list[Path], analysis: dict, out: Path, st
             mine = picked.setdefault(row["condition"], [])
             if len(mine) >= analysis.get("trials", 2) or not any(trial in series[n] for n in names):
                 continue
+            if any(row.get(k) != v for k, v in (analysis.get("where") or {}).items()):
+                continue
             start = starts.get(trial, 0.0)
             found = {n: series[n][trial] for n in names if trial in series[n]}
-            happened = [(e.times - start, e.texts) for n in event_names if trial in (e := marks[n].get(trial) or {})]
+            happened = [(e.times - start, e.texts) for n in event_names if (e := marks[n].get(trial)) is not None]
             mine.append((row, start, found, happened))
     drawn = [item for items in picked.values() for item in items]
     if not drawn:
@@ -390,8 +392,9 @@ def trace_section(t: Trials, run_dirs: list[Path], analysis: dict, out: Path, st
                 f"| {row['trial']} | {row['condition']} | {w:.2f} | {text} |"
                 for w, text in zip(times, texts, strict=True)
             ]
+    labels = read_labels(Path(run_dirs[0]) / "recording.rrd", names) if run_dirs else {}
     for ax, name in zip(axes[:, 0], names, strict=True):
-        ax.set_ylabel(name.rpartition("/")[2], fontsize=10)
+        ax.set_ylabel(labels.get(name, name.rpartition("/")[2]), fontsize=10)
         ax.grid(alpha=0.3)
     axes[0, 0].legend(fontsize=7, loc="upper right")
     axes[-1, 0].set_xlabel("time in the trial, s (dashed: events)", fontsize=11)

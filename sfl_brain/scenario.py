@@ -133,6 +133,7 @@ class TraceAnalysis(Strict):
     series: list[str] = Field(min_length=1, max_length=8, description="entity paths, e.g. body/torso/pitch")
     events: list[str] = Field([], max_length=8, description="event entity paths marked on it")
     trials: int = Field(2, ge=1, le=20, description="logged trials drawn per condition")
+    where: dict[str, TrialValue] = Field({}, description="only logged trials with these grid values")
 
 
 Analysis = Annotated[PoincareAnalysis | TraceAnalysis, Field(discriminator="kind")]

@@ -189,3 +189,27 @@ modules:
     assert """switch: expected "none" or one of the presets ['brace']; got 'bracee' (did you mean 'brace'?)""" in (
         done.stderr
     )
+
+
+def test_e4_7_runs_its_conditions_and_the_report_marks_each_switch_at_its_push(tmp_path):
+    out = tmp_path / "run"
+    sets = (
+        "protocol.grid.body.push_time=[9.2]",
+        "protocol.grid.body.push_force=[34.0]",
+        "protocol.repeats=1",
+        "record.body_every=1",
+        "modules.body.params.duration=10",
+    )
+    done = sfl_run(SCENARIOS / "e4_7_push.yaml", out, *sets)
+    assert done.returncode == 0, done.stderr
+    table = pq.read_table(out / "trials.parquet").to_pandas()
+    assert list(table["condition"]) == ["walk", "switch", "switch_angle"]
+    assert list(table["controller.switch"]) == ["none", "reaction", "reaction_angle"]
+    report = sfl("report", str(out), "--out", str(tmp_path / "report"))
+    assert report.returncode == 0, report.stderr
+    page = (tmp_path / "report" / "e4_7_push.md").read_text()
+    switches = [line for line in page.splitlines() if "pattern switch" in line]
+    # the switch follows the push (switch_at = push_time), in the two switching conditions only
+    assert [line.split(" | ")[1:3] for line in switches] == [["switch", "9.20"], ["switch_angle", "9.20"]]
+    assert "couplings silenced between hip_pitch_l-hip_pitch_r" in switches[0]
+    assert (tmp_path / "report" / "e4_7_push_trace.png").stat().st_size > 20_000
