@@ -119,11 +119,13 @@ class SelfOrganisingMap:
 
     # --- learning ------------------------------------------------------------------
     def update(self, v: np.ndarray, rho: float = 1.0) -> float:
-        """Learn v: w_i += eps h_ci rho (v - w_i)  (2.9-2.11, 5.1). Returns sum of squared changes."""
+        """Learn v: w_i += min(eps h_ci rho, 1) (v - w_i)  (2.9-2.11, 5.1). Returns sum of squared changes."""
         s = self.winner(v)
         sigma = self.radius()
         h = np.exp(-self._grid_distance[s] / (2.0 * sigma**2))  # (2.11)
-        delta = (self.learning_rate() * rho) * h[:, None] * (v - self.weights)  # (2.10), (5.1)
+        # (2.10), (5.1); gamma h rho at most 1 (CPG-HUMANOID.md §7.15): rho up to 2.5 must not carry a neuron past v
+        step = np.minimum((self.learning_rate() * rho) * h, 1.0)
+        delta = step[:, None] * (v - self.weights)
         self.weights += delta  # (2.9)
         self.wins[s] += 1
         self.samples += 1

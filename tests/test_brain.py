@@ -175,3 +175,15 @@ def test_segments_join_exactly_the_grid_neighbours(shape, dim):
     assert sorted(e.tobytes() for e in expected) == sorted(g.tobytes() for g in segments)
     stacked = s.segments(np.stack([s.weights, s.weights + 1.0]))  # snapshots, as ACC logs them
     np.testing.assert_array_equal(stacked[1], segments + 1.0)
+
+
+def test_a_large_reward_never_carries_a_neuron_past_the_sample():
+    """(5.1) with rho up to 2.5: gamma h rho is capped at 1 (CPG-HUMANOID.md §7.15): the winner lands on v at most."""
+    som = SelfOrganisingMap(SOMParams(shape=(3, 3), learning_rate=1.0), dim=2, rng=np.random.default_rng(0))
+    v = np.array([0.5, 0.5])
+    winner = som.winner(v)
+    before = som.weights.copy()
+    som.update(v, rho=2.5)
+    assert np.allclose(som.weights[winner], v)
+    moved = np.linalg.norm(som.weights - before, axis=1)
+    assert np.all(moved <= np.linalg.norm(v - before, axis=1) + 1e-12)  # no neuron overshoots
