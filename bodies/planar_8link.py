@@ -50,7 +50,27 @@ axis' angle to the vertical (rad, + = leaning forward), its rate, the ground slo
 the joint speeds. Speeds, forces and ``fall`` saturate at their declared bounds.
 
 Pushes (E4.3, E4.4, L1270, L1319): a horizontal force ``push_force`` (N, + = forward, i.e. on the
-back) at the trunk's centre of mass from ``push_time`` for ``push_duration`` s.
+back) at the trunk's centre of mass from ``push_time`` for ``push_duration`` s, or at a phase of the gait that the
+body measures itself (chosen here; the thesis gives no timing):
+
+* a left heel strike is the left heel force (the tick's mean, as sensed) rising through ``heel_strike`` (50 N, GB_l's
+  threshold in the circuit); a rise within ``strike_refractory`` (0.4 s) of the last strike is the same landing
+  bouncing. The first tick's stance is no strike. ``heel_strikes`` lists their times (s).
+* the gait period T is the median interval of the left heel strikes from ``gait_from`` (2 s, past the start's
+  transient) up to the moment it is needed, from at least 2 intervals (3 strikes);
+* ``push_phase`` p in [0, 1): the push starts at the first left heel strike at or after ``push_time`` by which T is
+  measured (the strike included), plus p T;
+* ``push_steps`` n (instead of ``push_duration``): the push lasts n T / 2 (a step = half a cycle, digest §7.12); with
+  no ``push_phase`` it starts at ``push_time`` and T is measured then.
+
+The push acts on whole control ticks: on the ticks whose start t satisfies onset <= t < onset + length (1e-9 s of
+slack), so the onset and length are rounded to the tick. If T cannot be measured (the walker fell or stands) or the
+onset comes after the trial's end, there is no push, and the trial is judged as any other. A trial that asks for a
+push (a force and a length) reports ``push_onset`` (s, the first pushed tick; None if none), ``push_duration`` (s,
+the pushed ticks x the tick), ``push_impulse`` (N s, force x that duration), ``push_anchor`` (s, the strike the
+phase counts from; None without ``push_phase``), ``gait_period`` (s, the T used; for a push at a time, T measured up
+to its onset; None if too few strikes) and ``push_missed`` (no tick was pushed); an unpushed trial reports only
+the metrics it always did.
 
 A trial ends with a fall (the digest's humanoid rule, §7.14: the hip below half its standing height,
 or the pelvis tilted beyond 45 deg; here also any link but a foot on the ground) or at ``duration``.
@@ -62,7 +82,23 @@ alternating. Quality eta: walking efficiency (5.7)-(5.8), kinetic energy at the 
 Start: standing, feet flat, pelvis and trunk upright, at rest; ``initial_knee`` bends the knees
 (hips and ankles half as much, the hip above the ankles), ``initial_step`` puts the left foot ahead.
 ``start_noise`` (chosen here, as the humanoid's, for experiments over seeds: E4.3, E4.4) makes the start differ by
-the trial seed: a normal offset of that s.d. added to the crouch (rad) and a forward speed of all links (m/s).
+the trial seed: a normal offset of that s.d. added to the crouch (rad) and a forward speed of all links (m/s). It
+changes the walker's state, not its timing: under the CPG the heel strikes after 4 s fall within 10-70 ms of each
+other over seeds whatever the noise (0.02 or 0.1; the rhythm generators start from the same kick at t = 0 and heel
+contact only resets them weakly), while the step length and speed at a strike differ (0.47-0.55 m, 0.86-1.03 m/s
+at 0.02). See docs/bodies/planar_8link.md.
+
+``PlanarWalker8Servo`` (registered as ``planar_8link_servo``) is the same walker with a position servo per joint,
+the servo of L1201 taken literally: its commands are target angles ``q_<joint>`` (rad, clipped to the joint's stops),
+and every control tick the servo sets the same DC motor's voltage to V = clip(K_p (q_cmd - q) - K_d omega, +-12 V)
+(q, omega: the joint's angle and speed at the tick's start), so the torque, the back-EMF and the energy E_e are the
+voltage walker's and the two compare. K_p = 30 V/rad (180 N m/rad, just above the 166 N m/rad gravity asks at the
+ankles of the 22-kg walker, m g h with h = 0.77 m), K_d = 0: the motor's own back-EMF (9 N m s/rad) damps it; on a
+light link the servo behaves as a first-order loop closing K_p / k_t = 20 per s, stable at the 10-ms tick up to
+K_p = 2 k_t / tick = 300 V/rad, and a K_d on the tick-old speed is stable only below k_t = 1.5 V s/rad. K_p came
+with the circuit ``modules/cpg/circuits/planar_8link_servo.yaml`` from a search over 30, 50 and 100 V/rad: stiffer
+servos did not walk (100: no configuration of 181). Its ``strike_refractory`` is 0.6 s: this walker's heel can land
+twice in a cycle, about 0.5 s apart.
 
 Physics: pymunk, 10 steps of 1 ms per 10-ms control tick, 20 solver iterations (chosen by probing:
 with fewer, the joints of the 9-kg trunk over 0.5-kg feet go soft and a standing walker rocks onto its
@@ -750,3 +786,49 @@ def _picture_points(poses: np.ndarray) -> np.ndarray:
     lx, ly = _PICTURE_LOCAL.T
     c, s = np.cos(a), np.sin(a)
     return np.stack([x + c * lx - s * ly, y + s * lx + c * ly], axis=-1)
+
+
+# --- the position-servo variant ------------------------------------------------------------------------------------
+SERVO_GAIN = 30.0  # V/rad: K_p, see PlanarWalker8Servo
+SERVO_DAMPING = 0.0  # V s/rad: K_d, see PlanarWalker8Servo
+_LOW = np.array([j[4][0] for j in JOINTS])
+_HIGH = np.array([j[4][1] for j in JOINTS])
+SERVO_COMMANDS = tuple(
+    Signal(f"q_{j[0]}", "rad", *j[4], f"{j[0]} position target, + = extension, clipped to its stops") for j in JOINTS
+)
+
+
+class PlanarWalker8ServoParams(PlanarWalker8Params):
+    strike_refractory: float = Field(
+        0.6,
+        ge=0,
+        le=5,
+        description="s: a heel force rising again within this of the last strike is the same landing (0.6 here: "
+        "this walker's heel can land twice in a cycle, about 0.5 s apart)",
+    )
+    servo_gain: float = Field(
+        SERVO_GAIN, gt=0, le=150, description="K_p: V per rad of position error (the servo's proportional gain)"
+    )
+    servo_damping: float = Field(
+        SERVO_DAMPING,
+        ge=0,
+        lt=1.5,
+        description="K_d: V per rad/s of joint speed, on top of the motor's own back-EMF (below k_t = 1.5: stable "
+        "at the 10-ms tick)",
+    )
+
+
+class PlanarWalker8Servo(PlanarWalker8):
+    """The 8-link walker with a position servo per joint (L1201): commands are target angles ``q_<joint>`` (rad), the
+    servo drives the voltage walker's DC motors (see the module docstring)."""
+
+    Params = PlanarWalker8ServoParams
+    COMMANDS = SERVO_COMMANDS
+
+    def motor_voltage(self, command: np.ndarray) -> np.ndarray:
+        """The servo: V = clip(K_p (q_cmd - q) - K_d omega, +-MAX_VOLTAGE), q_cmd clipped to the joint's stops, q and
+        omega the joint's angle and speed at the start of the tick, into the same DC motor as the voltage walker."""
+        p = self.params
+        target = np.minimum(np.maximum(np.asarray(command, dtype=float), _LOW), _HIGH)
+        voltage = p.servo_gain * (target - self._angles) - p.servo_damping * self._speeds
+        return np.minimum(np.maximum(voltage, -MAX_VOLTAGE), MAX_VOLTAGE)
