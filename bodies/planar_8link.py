@@ -308,8 +308,10 @@ class PlanarWalker8(Body):
         if name == "terrain":
             for k, (_, slope) in enumerate(parse_terrain(value)):
                 check_number(f"terrain {value!r} piece {k} slope", slope, -MAX_SLOPE_DEG, MAX_SLOPE_DEG)
-        elif name == "push_phase":
-            if check_number(name, value, *TRIAL_LIMITS[name]) >= 1.0:
+        elif name == "push_phase":  # [0, 1): a phase of 1 is the next cycle's 0
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise ValueError(f"{name}: expected a number; got {value!r}")
+            if not (math.isfinite(value) and 0.0 <= value < 1.0):
                 raise ValueError(f"{name}: expected a number in [0, 1); got {value!r}")
         elif name in TRIAL_LIMITS:
             check_number(name, value, *TRIAL_LIMITS[name])
