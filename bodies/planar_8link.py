@@ -50,7 +50,27 @@ axis' angle to the vertical (rad, + = leaning forward), its rate, the ground slo
 the joint speeds. Speeds, forces and ``fall`` saturate at their declared bounds.
 
 Pushes (E4.3, E4.4, L1270, L1319): a horizontal force ``push_force`` (N, + = forward, i.e. on the
-back) at the trunk's centre of mass from ``push_time`` for ``push_duration`` s.
+back) at the trunk's centre of mass from ``push_time`` for ``push_duration`` s, or at a phase of the gait that the
+body measures itself (chosen here; the thesis gives no timing):
+
+* a left heel strike is the left heel force (the tick's mean, as sensed) rising through ``heel_strike`` (50 N, GB_l's
+  threshold in the circuit); a rise within ``strike_refractory`` (0.4 s) of the last strike is the same landing
+  bouncing. The first tick's stance is no strike. ``heel_strikes`` lists their times (s).
+* the gait period T is the median interval of the left heel strikes from ``gait_from`` (2 s, past the start's
+  transient) up to the moment it is needed, from at least 2 intervals (3 strikes);
+* ``push_phase`` p in [0, 1): the push starts at the first left heel strike at or after ``push_time`` by which T is
+  measured (the strike included), plus p T;
+* ``push_steps`` n (instead of ``push_duration``): the push lasts n T / 2 (a step = half a cycle, digest §7.12); with
+  no ``push_phase`` it starts at ``push_time`` and T is measured then.
+
+The push acts on whole control ticks: on the ticks whose start t satisfies onset <= t < onset + length (1e-9 s of
+slack), so the onset and length are rounded to the tick. If T cannot be measured (the walker fell or stands) or the
+onset comes after the trial's end, there is no push, and the trial is judged as any other. A trial that asks for a
+push (a force and a length) reports ``push_onset`` (s, the first pushed tick; None if none), ``push_duration`` (s,
+the pushed ticks x the tick), ``push_impulse`` (N s, force x that duration), ``push_anchor`` (s, the strike the
+phase counts from; None without ``push_phase``), ``gait_period`` (s, the T used; for a push at a time, T measured up
+to its onset; None if too few strikes) and ``push_missed`` (no tick was pushed); an unpushed trial reports only
+the metrics it always did.
 
 A trial ends with a fall (the digest's humanoid rule, §7.14: the hip below half its standing height,
 or the pelvis tilted beyond 45 deg; here also any link but a foot on the ground) or at ``duration``.
@@ -62,7 +82,23 @@ alternating. Quality eta: walking efficiency (5.7)-(5.8), kinetic energy at the 
 Start: standing, feet flat, pelvis and trunk upright, at rest; ``initial_knee`` bends the knees
 (hips and ankles half as much, the hip above the ankles), ``initial_step`` puts the left foot ahead.
 ``start_noise`` (chosen here, as the humanoid's, for experiments over seeds: E4.3, E4.4) makes the start differ by
-the trial seed: a normal offset of that s.d. added to the crouch (rad) and a forward speed of all links (m/s).
+the trial seed: a normal offset of that s.d. added to the crouch (rad) and a forward speed of all links (m/s). It
+changes the walker's state, not its timing: under the CPG the heel strikes after 4 s fall within 10-70 ms of each
+other over seeds whatever the noise (0.02 or 0.1; the rhythm generators start from the same kick at t = 0 and heel
+contact only resets them weakly), while the step length and speed at a strike differ (0.47-0.55 m, 0.86-1.03 m/s
+at 0.02). See docs/bodies/planar_8link.md.
+
+``PlanarWalker8Servo`` (registered as ``planar_8link_servo``) is the same walker with a position servo per joint,
+the servo of L1201 taken literally: its commands are target angles ``q_<joint>`` (rad, clipped to the joint's stops),
+and every control tick the servo sets the same DC motor's voltage to V = clip(K_p (q_cmd - q) - K_d omega, +-12 V)
+(q, omega: the joint's angle and speed at the tick's start), so the torque, the back-EMF and the energy E_e are the
+voltage walker's and the two compare. K_p = 30 V/rad (180 N m/rad, just above the 166 N m/rad gravity asks at the
+ankles of the 22-kg walker, m g h with h = 0.77 m), K_d = 0: the motor's own back-EMF (9 N m s/rad) damps it; on a
+light link the servo behaves as a first-order loop closing K_p / k_t = 20 per s, stable at the 10-ms tick up to
+K_p = 2 k_t / tick = 300 V/rad, and a K_d on the tick-old speed is stable only below k_t = 1.5 V s/rad. K_p came
+with the circuit ``modules/cpg/circuits/planar_8link_servo.yaml`` from a search over 30, 50 and 100 V/rad: stiffer
+servos did not walk (100: no configuration of 181). Its ``strike_refractory`` is 0.6 s: this walker's heel can land
+twice in a cycle, about 0.5 s apart.
 
 Physics: pymunk, 10 steps of 1 ms per 10-ms control tick, 20 solver iterations (chosen by probing:
 with fewer, the joints of the 9-kg trunk over 0.5-kg feet go soft and a standing walker rocks onto its
@@ -211,7 +247,10 @@ TRIAL_LIMITS = {  # name: (low, high) of each numeric trial parameter
     "push_force": (-1000.0, 1000.0),  # N
     "push_time": (0.0, 600.0),  # s
     "push_duration": (0.0, 600.0),  # s
+    "push_phase": (0.0, 1.0),  # of the measured gait cycle, 1 excluded (check_trial_param)
+    "push_steps": (0.0, 100.0),  # steps of T / 2
 }
+MIN_GAIT_INTERVALS = 2  # left heel strike intervals the gait period T is the median of, at least
 
 
 class PlanarWalker8Params(BodyParams):
@@ -237,6 +276,19 @@ class PlanarWalker8Params(BodyParams):
         description="s.d. of the start's offsets, drawn from the trial seed: the crouch (rad, added to initial_knee) "
         "and the whole walker's forward speed (m/s); 0 = the same start every trial",
     )
+    heel_strike: float = Field(
+        50.0,
+        gt=0,
+        le=MAX_FORCE,
+        description="N: a left heel strike is the left heel force rising through this (GB_l's threshold in the "
+        "circuit; the gait phase of push_phase counts from these strikes)",
+    )
+    strike_refractory: float = Field(
+        0.4, ge=0, le=5, description="s: a heel force rising again within this of the last strike is the same landing"
+    )
+    gait_from: float = Field(
+        2.0, ge=0, le=600, description="s: the gait period T is measured from the left heel strikes from this time on"
+    )
 
 
 class PlanarWalker8(Body):
@@ -245,7 +297,7 @@ class PlanarWalker8(Body):
     Params = PlanarWalker8Params
     SENSORS = SENSORS
     COMMANDS = COMMANDS
-    TRIAL_PARAMS = ("slope_deg", "terrain", "push_force", "push_time", "push_duration")
+    TRIAL_PARAMS = ("slope_deg", "terrain", "push_force", "push_time", "push_duration", "push_phase", "push_steps")
 
     #: keep this trial's samples for log_trial (Body.trial sets it per trial: a logged trial with a sink)
     logging = False
@@ -256,6 +308,11 @@ class PlanarWalker8(Body):
         if name == "terrain":
             for k, (_, slope) in enumerate(parse_terrain(value)):
                 check_number(f"terrain {value!r} piece {k} slope", slope, -MAX_SLOPE_DEG, MAX_SLOPE_DEG)
+        elif name == "push_phase":  # [0, 1): a phase of 1 is the next cycle's 0
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise ValueError(f"{name}: expected a number; got {value!r}")
+            if not (math.isfinite(value) and 0.0 <= value < 1.0):
+                raise ValueError(f"{name}: expected a number in [0, 1); got {value!r}")
         elif name in TRIAL_LIMITS:
             check_number(name, value, *TRIAL_LIMITS[name])
 
@@ -270,9 +327,7 @@ class PlanarWalker8(Body):
             self.pieces = [(length, math.radians(s)) for length, s in parse_terrain(given["terrain"])]
         else:
             self.pieces = [(60.0, math.radians(float(given.get("slope_deg", 0.0))))]
-        self.push_force = float(given.get("push_force", 0.0))
-        self.push_time = float(given.get("push_time", 0.0))
-        self.push_duration = float(given.get("push_duration", 0.0)) if self.push_force else 0.0
+        self._plan_push(given)
         space = pymunk.Space()
         space.gravity = (0.0, -G)
         space.iterations = p.iterations
@@ -294,6 +349,11 @@ class PlanarWalker8(Body):
         self.fall_reason = ""
         self.steps = 0
         self.pushed = False
+        self._push_ticks = 0  # control ticks the push acted on
+        self._push_first: float | None = None  # s: the start of the first of them
+        #: s: the left heel strikes (heel force rising through ``heel_strike``, ``strike_refractory`` apart)
+        self.heel_strikes: list[float] = []
+        self._heel_on: bool | None = None  # the left heel above heel_strike at the last tick (None: no tick yet)
         self._last_step_foot = -1
         self._read_state()
         self._read_contacts()
@@ -304,6 +364,32 @@ class PlanarWalker8(Body):
         self._tick = 0
         self._log: list[np.ndarray] | None = [] if self.logging else None
         self._log_every = rates_of(self.telemetry).sample_every(p.control_dt) if self.logging else 0
+
+    def _plan_push(self, given: dict) -> None:
+        """This trial's push from its parameters (checked): at a time (``push_time``, ``push_duration``), or at a gait
+        phase (``push_phase``) and/or for a number of steps (``push_steps``), then placed by ``_watch_gait``."""
+        if "push_steps" in given and "push_duration" in given:
+            raise ValueError(
+                f"push_steps: expected push_steps or push_duration; got both ({given['push_steps']!r}, "
+                f"{given['push_duration']!r})"
+            )
+        self.push_force = float(given.get("push_force", 0.0))
+        self.push_time = float(given.get("push_time", 0.0))
+        self.push_duration = float(given.get("push_duration", 0.0)) if self.push_force else 0.0
+        self.push_phase = float(given["push_phase"]) if "push_phase" in given else None
+        self.push_steps = float(given["push_steps"]) if "push_steps" in given else None
+        length = self.push_steps if self.push_steps is not None else self.push_duration
+        #: a push was asked for: a force, and a length (s or steps)
+        self.push_requested = bool(self.push_force) and length > 0
+        #: its onset or length comes from the gait this trial measures (the left heel strikes)
+        self.push_on_gait = self.push_requested and (self.push_phase is not None or self.push_steps is not None)
+        self.gait_period: float | None = None  # s: T, the median left heel strike interval (from gait_from on)
+        self.push_anchor: float | None = None  # s: the left heel strike push_phase counts from
+        self._push_placed = not self.push_on_gait  # False until _watch_gait has placed it (or given up)
+        if self.push_on_gait:
+            self._push_start = self._push_end = math.inf
+        else:
+            self._push_start, self._push_end = self.push_time, self.push_time + self.push_duration
 
     def _build_ground(self) -> None:
         """Static segments along the profile: a run-in behind x = 0, the pieces, a run-out of 60 m."""
@@ -494,13 +580,17 @@ class PlanarWalker8(Body):
     # ------------------------------------------------------------------ acting
     def actuate(self, command: np.ndarray) -> None:
         p = self.params
-        voltage = np.minimum(np.maximum(np.asarray(command, dtype=float), -MAX_VOLTAGE), MAX_VOLTAGE)
+        voltage = self.motor_voltage(command)
         dt, h = p.control_dt, p.control_dt / p.substeps
         # tau = k_t V / R per joint (+ = extension); the -k_t^2 omega / R part is the damper built in
         wrench = self._wrench
         wrench[self._rows, 2] = _TORQUE_MAP @ (voltage * (p.torque_constant / p.resistance))
-        pushing = self.push_duration > 0 and self.push_time <= self.t + 1e-9 < self.push_time + self.push_duration
+        pushing = self.push_requested and self._push_start <= self.t + 1e-9 < self._push_end
         wrench[self._rows[TRUNK_ROW], 0] = self.push_force if pushing else 0.0
+        if pushing:
+            if self._push_first is None:
+                self._push_first = self.t
+            self._push_ticks += 1
         self.pushed = self.pushed or pushing
         buffer = self._wrench_buffer
         space, set_bodies, fields = self.space, pymunk.batch.set_space_bodies, _BF.FORCE | _BF.TORQUE
@@ -519,12 +609,57 @@ class PlanarWalker8(Body):
         self.energy += float(current @ current) * p.resistance * dt  # (5.5)-(5.6)
         self.t += dt
         self._count_steps()
+        self._watch_gait()
         self._check_fall()
         if self._log is not None and self._tick % self._log_every == 0:
             self._log.append(
                 np.concatenate([(self._tick,), self._state[:, :3].ravel(), self.sense(), voltage, (pushing,)])
             )
         self._tick += 1
+
+    def motor_voltage(self, command: np.ndarray) -> np.ndarray:
+        """The motors' voltages (V, COMMANDS order) for a tick's command: here the command itself, clipped."""
+        return np.minimum(np.maximum(np.asarray(command, dtype=float), -MAX_VOLTAGE), MAX_VOLTAGE)
+
+    def _watch_gait(self) -> None:
+        """Left heel strikes (the heel force, the tick's mean, rising through ``heel_strike``; a rise within
+        ``strike_refractory`` of the last strike is the same landing bouncing), and the push they place: with
+        ``push_phase``, at the first strike at or after ``push_time`` by which T is measured, plus push_phase x T;
+        with ``push_steps`` alone, at ``push_time``. T = the median interval of the strikes from ``gait_from`` on (at
+        least MIN_GAIT_INTERVALS intervals); the push lasts push_steps x T / 2 (a step = half a cycle, §7.12)."""
+        p = self.params
+        on = bool(self._forces[0] >= p.heel_strike)
+        struck = False
+        if self._heel_on is False and on:  # the start's stance (no tick before) is no strike
+            strikes = self.heel_strikes
+            if not strikes or self.t - strikes[-1] > p.strike_refractory:
+                strikes.append(self.t)
+                struck = True
+        self._heel_on = on
+        if self._push_placed or self.t < self.push_time - 1e-9:
+            return
+        if self.push_phase is not None and not struck:
+            return
+        period = self._measured_period(self.t)
+        if period is None:
+            if self.push_phase is None:  # push_steps at push_time: no period measured by then, no push
+                self._push_placed = True
+            return
+        onset = self.t if self.push_phase is None else self.t + self.push_phase * period
+        if self.push_phase is not None:
+            self.push_anchor = self.t
+        if self.push_steps is not None:
+            self.push_duration = self.push_steps * period / 2
+        self.gait_period = period
+        self._push_start, self._push_end = onset, onset + self.push_duration
+        self._push_placed = True
+
+    def _measured_period(self, until: float) -> float | None:
+        """T (s): the median interval of the left heel strikes in [gait_from, until]; None with too few."""
+        strikes = [t for t in self.heel_strikes if self.params.gait_from - 1e-9 <= t <= until + 1e-9]
+        if len(strikes) < MIN_GAIT_INTERVALS + 1:
+            return None
+        return float(np.median(np.diff(strikes)))
 
     def _count_steps(self) -> None:
         p = self.params
@@ -575,6 +710,21 @@ class PlanarWalker8(Body):
             "fell_at": self.fell_at,
             "pushed": self.pushed,
         }
+        if self.push_requested:  # unpushed trials keep the metrics above only
+            onset, duration = self._push_first, self._push_ticks * self.params.control_dt
+            period = self.gait_period
+            if period is None and onset is not None:
+                period = self._measured_period(onset)  # a push at a time: the gait before it
+            metrics.update(
+                {
+                    "push_onset": onset,
+                    "push_duration": duration,
+                    "push_impulse": self.push_force * duration,
+                    "push_anchor": self.push_anchor,
+                    "gait_period": period,
+                    "push_missed": not self.pushed,
+                }
+            )
         return success, quality, metrics
 
     # ------------------------------------------------------------------ recording
@@ -614,12 +764,14 @@ class PlanarWalker8(Body):
         if self.pushed:
             rows = np.flatnonzero(pushing & pictured)
             if not len(rows):  # a push shorter than a picture's interval: one arrow at the next picture
-                rows = np.flatnonzero(pictured & (times >= trial_id * p.duration + self.push_time))[:1]
+                rows = np.flatnonzero(pictured & (times >= trial_id * p.duration + self._push_first))[:1]
             vectors = np.zeros((len(rows), 2))
             vectors[:, 0] = self.push_force / 100.0
             sink.emit(Arrows2D("push", trial_id, times[rows], poses[rows, TRUNK_ROW, :2] - vectors, vectors))
-            text = f"push {self.push_force:g} N on the trunk for {self.push_duration:g} s"
-            sink.emit(Event("events/push", trial_id, trial_id * p.duration + self.push_time, text))
+            text = f"push {self.push_force:g} N on the trunk for {self._push_ticks * p.control_dt:g} s"
+            if self.push_anchor is not None:
+                text += f", phase {self.push_phase:g} of the gait cycle T = {self.gait_period:.3f} s"
+            sink.emit(Event("events/push", trial_id, trial_id * p.duration + self._push_first, text))
         if self.fell:
             text = f"fell: {self.fall_reason}"
             sink.emit(Event("events/fall", trial_id, trial_id * p.duration + self.fell_at, text, "WARN"))
@@ -636,3 +788,49 @@ def _picture_points(poses: np.ndarray) -> np.ndarray:
     lx, ly = _PICTURE_LOCAL.T
     c, s = np.cos(a), np.sin(a)
     return np.stack([x + c * lx - s * ly, y + s * lx + c * ly], axis=-1)
+
+
+# --- the position-servo variant ------------------------------------------------------------------------------------
+SERVO_GAIN = 30.0  # V/rad: K_p, see PlanarWalker8Servo
+SERVO_DAMPING = 0.0  # V s/rad: K_d, see PlanarWalker8Servo
+_LOW = np.array([j[4][0] for j in JOINTS])
+_HIGH = np.array([j[4][1] for j in JOINTS])
+SERVO_COMMANDS = tuple(
+    Signal(f"q_{j[0]}", "rad", *j[4], f"{j[0]} position target, + = extension, clipped to its stops") for j in JOINTS
+)
+
+
+class PlanarWalker8ServoParams(PlanarWalker8Params):
+    strike_refractory: float = Field(
+        0.6,
+        ge=0,
+        le=5,
+        description="s: a heel force rising again within this of the last strike is the same landing (0.6 here: "
+        "this walker's heel can land twice in a cycle, about 0.5 s apart)",
+    )
+    servo_gain: float = Field(
+        SERVO_GAIN, gt=0, le=150, description="K_p: V per rad of position error (the servo's proportional gain)"
+    )
+    servo_damping: float = Field(
+        SERVO_DAMPING,
+        ge=0,
+        lt=1.5,
+        description="K_d: V per rad/s of joint speed, on top of the motor's own back-EMF (below k_t = 1.5: stable "
+        "at the 10-ms tick)",
+    )
+
+
+class PlanarWalker8Servo(PlanarWalker8):
+    """The 8-link walker with a position servo per joint (L1201): commands are target angles ``q_<joint>`` (rad), the
+    servo drives the voltage walker's DC motors (see the module docstring)."""
+
+    Params = PlanarWalker8ServoParams
+    COMMANDS = SERVO_COMMANDS
+
+    def motor_voltage(self, command: np.ndarray) -> np.ndarray:
+        """The servo: V = clip(K_p (q_cmd - q) - K_d omega, +-MAX_VOLTAGE), q_cmd clipped to the joint's stops, q and
+        omega the joint's angle and speed at the start of the tick, into the same DC motor as the voltage walker."""
+        p = self.params
+        target = np.minimum(np.maximum(np.asarray(command, dtype=float), _LOW), _HIGH)
+        voltage = p.servo_gain * (target - self._angles) - p.servo_damping * self._speeds
+        return np.minimum(np.maximum(voltage, -MAX_VOLTAGE), MAX_VOLTAGE)

@@ -473,9 +473,9 @@ def test_a_continuous_switch_keeps_the_command_at_the_measured_angle_where_theta
 
 def test_every_shipped_circuit_loads():
     names = sorted(p.stem for p in CIRCUITS.glob("*.yaml"))
-    assert names == ["author_code", "humanoid_nao", "planar_8link"]
+    assert names == ["author_code", "humanoid_nao", "planar_8link", "planar_8link_servo"]
     joints = {name: len(load_circuit(name).joints) for name in names}
-    assert joints == {"author_code": 12, "humanoid_nao": 12, "planar_8link": 7}
+    assert joints == {"author_code": 12, "humanoid_nao": 12, "planar_8link": 7, "planar_8link_servo": 7}
 
 
 def write(tmp_path: Path, data: dict) -> Path:
