@@ -527,6 +527,9 @@ class PlanarWalker8(Body):
         impulse / control_dt, as a force sensor low-passed at the tick sees them."""
         ids = np.frombuffer(ids, dtype=np.uintp).reshape(-1, 2)
         data = np.frombuffer(data).reshape(-1, 8)  # impulse x y, normal x y, point a x y, point b x y
+        if len(ids) > 1:  # pymunk lists contacts in an order of memory addresses: sum them in an order of their values,
+            order = np.lexsort(data.T)  # so that every run of a trial is the same to the last bit
+            ids, data = ids[order], data[order]
         self._other_contact = False
         feet = self._state[FOOT_ROWS, :]  # x, y, angle of each foot's middle
         self._feet = np.column_stack([feet[:, 0], feet[:, 1], np.cos(feet[:, 2]), np.sin(feet[:, 2])])

@@ -269,3 +269,28 @@ def test_trial_parameters_are_checked(name, value, message):
     PlanarWalker8.check_trial_param("terrain", "0.5:0,1:8")
     with pytest.raises(ValueError, match="push_force"):
         trial(duration=0.01, body_params={"push_force": float("nan")})
+
+
+def test_a_trial_is_the_same_to_the_last_bit_in_every_process():
+    """pymunk lists contacts in an order of memory addresses; the body sums them in an order of their values, so a trial
+    repeats exactly whatever else a process holds in memory (docs/bodies/planar_8link.md, Reproducibility)."""
+    import subprocess
+    import sys
+
+    code = """
+import numpy as np
+from sfl_brain.bodies.planar_8link import PlanarWalker8
+from sfl_brain.body import InProcessLink
+from sfl_brain.messages import TrialRequest
+from sfl_brain.modules.controllers.cpg import CPGController, CPGParams
+ballast = [np.zeros(1000) for _ in range({n})]  # another memory layout
+body = PlanarWalker8(PlanarWalker8.Params(initial_knee=-0.3, start_noise=0.02))
+body.link = InProcessLink(CPGController(CPGParams(circuit="planar_8link")))
+m = body.handle(TrialRequest(trial_id=0, seed=3, body_params={{}}, controller_params={{}}, log=False)).metrics
+print(repr(m["energy"]), repr(m["distance"]), m["steps"])
+"""
+    outputs = {
+        subprocess.run([sys.executable, "-c", code.format(n=n)], capture_output=True, text=True, check=True).stdout
+        for n in (0, 37, 211)
+    }
+    assert len(outputs) == 1, outputs
