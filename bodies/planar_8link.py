@@ -47,7 +47,9 @@ over the tick's physics steps, as a force sensor read every tick), ``fall`` = ce
 centre of pressure along the horizontal (m, + = the centre of mass ahead: falling forward; with no
 foot on the ground the feet's midpoint stands in for the centre of pressure), ``pelvis`` = the pelvis
 axis' angle to the vertical (rad, + = leaning forward), its rate, the ground slope under the hip, and
-the joint speeds. Speeds, forces and ``fall`` saturate at their declared bounds.
+the joint speeds, and ``back``: the force pressing on the trunk's back over the last tick (N; a touch sensor, chosen
+here: it tells a controller a push has come, as a perfect push detector would, for E4.4's switch). Speeds, forces and
+``fall`` saturate at their declared bounds.
 
 Pushes (E4.3, E4.4, L1270, L1319): a horizontal force ``push_force`` (N, + = forward, i.e. on the
 back) at the trunk's centre of mass from ``push_time`` for ``push_duration`` s, or at a phase of the gait that the
@@ -206,6 +208,7 @@ SENSORS = (
     Signal("pelvis_rate", "rad/s", -MAX_SPEED, MAX_SPEED, "d pelvis / dt, + = tipping forward"),
     Signal("slope", "rad", -math.radians(MAX_SLOPE_DEG), math.radians(MAX_SLOPE_DEG), "ground under the hip, uphill +"),
     *(Signal(f"{j[0]}_speed", "rad/s", -MAX_SPEED, MAX_SPEED, f"d {j[0]} / dt, + = extending") for j in JOINTS),
+    Signal("back", "N", 0.0, 1000.0, "force pressing on the trunk's back over the last tick (a touch sensor: a push)"),
 )
 COMMANDS = tuple(
     Signal(f"v_{j[0]}", "V", -MAX_VOLTAGE, MAX_VOLTAGE, f"{j[0]} motor voltage (3.6), + = extend, clipped")
@@ -349,6 +352,7 @@ class PlanarWalker8(Body):
         self.fall_reason = ""
         self.steps = 0
         self.pushed = False
+        self._back = 0.0  # N on the trunk's back over the last tick (the sensor `back`)
         self._push_ticks = 0  # control ticks the push acted on
         self._push_first: float | None = None  # s: the start of the first of them
         #: s: the left heel strikes (heel force rising through ``heel_strike``, ``strike_refractory`` apart)
@@ -577,6 +581,7 @@ class PlanarWalker8(Body):
                     float(self.ground_slope(hip_x)),
                 ],
                 np.minimum(np.maximum(self._speeds, -MAX_SPEED), MAX_SPEED),
+                [self._back],
             ]
         )
 
@@ -595,6 +600,7 @@ class PlanarWalker8(Body):
                 self._push_first = self.t
             self._push_ticks += 1
         self.pushed = self.pushed or pushing
+        self._back = max(self.push_force, 0.0) if pushing else 0.0  # a forward push presses on the back
         buffer = self._wrench_buffer
         space, set_bodies, fields = self.space, pymunk.batch.set_space_bodies, _BF.FORCE | _BF.TORQUE
         get_arbiters, contacts = pymunk.batch.get_space_arbiters, self._arbiter_buffer

@@ -196,3 +196,29 @@ def test_seeds_change_the_walkers_state_not_its_timing():
             distances.append(result.metrics["distance"])
         assert np.ptp(distances) > 0.02
         assert np.ptp(firsts) < 0.1
+
+
+class FeelTheBack(HoldPosture):
+    """Holds the crouch and records the back sensor every tick."""
+
+    READS = (*HoldPosture.READS, "back")
+
+    def configure(self, params: dict, seed: int) -> None:
+        super().configure(params, seed)
+        self.felt: list[float] = []
+
+    def step(self, sensors: np.ndarray) -> np.ndarray:
+        self.felt.append(float(sensors[-1]))
+        return super().step(sensors[:-1])
+
+
+def test_the_back_sensor_feels_the_push_the_tick_after_it_acts():
+    body = PlanarWalker8(PlanarWalker8.Params(duration=2.0, initial_knee=-0.3))
+    controller = FeelTheBack()
+    body.link = InProcessLink(controller)
+    push = {"push_force": 45.0, "push_time": 1.0, "push_duration": 0.1}
+    body.handle(TrialRequest(trial_id=0, seed=0, body_params=push, controller_params={}, log=False))
+    felt = np.array(controller.felt)
+    ticks = np.flatnonzero(felt > 0)
+    # pushed over the ticks that start at 1.00 .. 1.09 s; sensed on the frames after each, 1.01 .. 1.10 s
+    assert list(ticks) == list(range(101, 111)) and np.allclose(felt[ticks], 45.0)
