@@ -73,21 +73,26 @@ class ACC(Module):
         return Evaluation(d_success=d_s, d_failure=d_f, go=~self.early_warning(d_s, d_f, msg.s_vig))
 
     # --- learning --------------------------------------------------------------------
-    def learn(self, v: np.ndarray, success: bool, rho: float = 1.0) -> float:
-        """A success teaches S_m with reward rho (5.1); a failure teaches F_m."""
+    def learn(self, v: np.ndarray, success: bool, rho: float = 1.0, eta: float | None = None) -> float:
+        """A success teaches S_m with reward rho (5.1), and its quality eta as the neurons' learnt reward; a failure
+        teaches F_m."""
         if success:
-            return self.success_map.update(v, rho)
+            return self.success_map.update(v, rho, eta)
         return self.failure_map.update(v, 1.0)
 
     @on(Learn)
     def on_learn(self, msg: Learn) -> Learned:
-        change = self.learn(np.asarray(msg.v, dtype=float), msg.success, msg.rho)
+        v = np.asarray(msg.v, dtype=float)
+        winners = self.success_map.winner(v), self.failure_map.winner(v)  # before learning: the maps that judged v
+        change = self.learn(v, msg.success, msg.rho, msg.eta)
         if self.telemetry is not None:
             self.defer(self.log_maps)  # after the reply: showing the maps is off the learning cycle's path
         return Learned(
             change=change,
             n_success_samples=self.success_map.samples,
             n_failure_samples=self.failure_map.samples,
+            success_winner=winners[0],
+            failure_winner=winners[1],
         )
 
     # --- after learning ----------------------------------------------------------------
@@ -127,6 +132,9 @@ class ACC(Module):
         np.savez(
             path,
             **{f"{name}_{key}": getattr(m, key) for name, m in self._maps() for key in ("weights", "wins", "active")},
+            success_reward=self.success_map.learnt_reward(),  # the eta each success neuron learnt (NaN: none)
+            success_reward_sum=self.success_map.reward_sum,
+            success_reward_weight=self.success_map.reward_weight,
             success_samples=self.success_map.samples,
             failure_samples=self.failure_map.samples,
         )
@@ -143,6 +151,9 @@ class ACC(Module):
                 m.active = data[f"{name}_active"].copy()
             self.success_map.samples = int(data["success_samples"])
             self.failure_map.samples = int(data["failure_samples"])
+            if "success_reward_sum" in data.files:  # checkpoints from before QARL's learnt rewards have none
+                self.success_map.reward_sum = data["success_reward_sum"].copy()
+                self.success_map.reward_weight = data["success_reward_weight"].copy()
 
     @on(Finish)
     def on_finish(self, msg: Finish) -> Ack:
@@ -184,7 +195,9 @@ class ACC(Module):
     def log_maps(self) -> None:
         """Snapshot both maps (weights, active flags) after this trial; emitted in batches (see flush_maps)."""
         trial = self.success_map.samples + self.failure_map.samples
-        self._snapshots.append((trial, {name: (m.weights.copy(), m.active.copy()) for name, m in self._maps()}))
+        self._snapshots.append(
+            (trial, {name: (m.weights.copy(), m.active.copy(), m.learnt_reward()) for name, m in self._maps()})
+        )
         if len(self._snapshots) >= self.LOG_BATCH or time.monotonic() - self._flushed > self.LOG_SECONDS:
             self.flush_maps()
 
@@ -200,8 +213,13 @@ class ACC(Module):
         for name, m in self._maps():
             weights = np.stack([snap[name][0] for _, snap in snapshots])
             active = np.stack([snap[name][1] for _, snap in snapshots])
+            reward = np.stack([snap[name][2] for _, snap in snapshots]) if name == "success" else None
+            if reward is not None and not np.isfinite(reward).any():
+                reward = None  # nothing graded (no OFC, or no success yet): the map's own colour
             self.telemetry.emit(
-                MapSnapshots(f"{name}_map", trials, weights, active, m.segments(weights), self.COLOURS[name], final)
+                MapSnapshots(
+                    f"{name}_map", trials, weights, active, m.segments(weights), self.COLOURS[name], final, reward
+                )
             )
 
     def close(self) -> None:

@@ -82,6 +82,10 @@ class SelfOrganisingMap:
         #: neurons taking part in evaluation (pruning switches some off)
         self.active = np.ones(self.size, dtype=bool)
         self.samples = 0
+        #: the reward each neuron has learnt (QARL, Fig. 5.9): the mean of the successes' eta weighted by how far
+        #: each pulled the neuron (min(gamma h rho, 1) of (5.1)); reward_weight 0: none yet
+        self.reward_sum = np.zeros(self.size)
+        self.reward_weight = np.zeros(self.size)
         self._radius0 = params.radius if params.radius is not None else max(self.shape) / 2.0
         # grid distances between every pair of neurons, for the neighbourhood (2.11)
         diff = self.grid[:, None, :] - self.grid[None, :, :]
@@ -118,18 +122,27 @@ class SelfOrganisingMap:
         return int(np.argmin(d))
 
     # --- learning ------------------------------------------------------------------
-    def update(self, v: np.ndarray, rho: float = 1.0) -> float:
-        """Learn v: w_i += min(eps h_ci rho, 1) (v - w_i)  (2.9-2.11, 5.1). Returns sum of squared changes."""
+    def update(self, v: np.ndarray, rho: float = 1.0, eta: float | None = None) -> float:
+        """Learn v: w_i += min(eps h_ci rho, 1) (v - w_i)  (2.9-2.11, 5.1). Returns sum of squared changes. ``eta``: the
+        trial's quality, which each neuron learns with the same weight as v (``learnt_reward``)."""
         s = self.winner(v)
         sigma = self.radius()
         h = np.exp(-self._grid_distance[s] / (2.0 * sigma**2))  # (2.11)
         # (2.10), (5.1); gamma h rho at most 1 (CPG-HUMANOID.md §7.15): rho up to 2.5 must not carry a neuron past v
         step = np.minimum((self.learning_rate() * rho) * h, 1.0)
         delta = step[:, None] * (v - self.weights)
+        if eta is not None:
+            self.reward_sum += step * eta
+            self.reward_weight += step
         self.weights += delta  # (2.9)
         self.wins[s] += 1
         self.samples += 1
         return float(np.einsum("ij,ij->", delta, delta))
+
+    def learnt_reward(self) -> np.ndarray:
+        """Each neuron's learnt reward: the eta of the successes it learnt, weighted as it learnt them (NaN: none)."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(self.reward_weight > 0, self.reward_sum / self.reward_weight, np.nan)
 
     def segments(self, weights: np.ndarray | None = None) -> np.ndarray:
         """Every grid edge as a segment, shape (..., edges, 2, dim): the mesh in one array (fast to log).

@@ -513,15 +513,20 @@ class Learn(Message, kw_only=True):
     v: np.ndarray
     success: bool
     rho: float
+    #: the success's quality eta (efficiency, (5.8)): what the success neurons learn as their reward; None: not graded
+    eta: float | None = None
 
 
 @message("acc.learned")
 class Learned(Message, kw_only=True):
-    """Sum of squared weight changes of the map that learnt (convergence) and sample counts."""
+    """Sum of squared weight changes of the map that learnt (convergence), sample counts, and the winner of each map
+    for the trial's vector before it learnt (neuron indices; -1: not given)."""
 
     change: float
     n_success_samples: int
     n_failure_samples: int
+    success_winner: int = -1
+    failure_winner: int = -1
 
 
 @message("acc.exploit")

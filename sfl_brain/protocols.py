@@ -203,6 +203,7 @@ def run_learn(c: Conductor) -> dict:
     progress = Progress(planned=proto.trials, max_decisions=proto.max_decisions, stall_decisions=proto.stall_decisions)
     threshold: m.Threshold = c.call(m.VigilanceStart())
     n_success = n_failure = 0
+    best: tuple[float, int, np.ndarray] | None = None  # (eta, trial, v) of the highest-reward success
     decision = 0
     consecutive_nogo = 0
     stop_reason = f"trial budget spent ({proto.trials} trials)"
@@ -293,8 +294,15 @@ def run_learn(c: Conductor) -> dict:
             n_failure += 1
         s_vig_used = threshold.s_vig
         low, high = threshold.low, threshold.high
+        if result.success and (best is None or result.quality > best[0]):
+            best = (float(result.quality), trial_id, v.copy())  # the highest-reward trial so far (L1584)
         learned, threshold = c.call_all(  # ACC and vigilance learn from the trial in parallel
-            m.Learn(v=v, success=result.success, rho=rho if rho is not None else 1.0),
+            m.Learn(
+                v=v,
+                success=result.success,
+                rho=rho if rho is not None else 1.0,
+                eta=float(result.quality) if result.success else None,
+            ),
             m.TrialDone(trial_index=trial_id + 1, success=result.success, n_success=n_success, n_failure=n_failure),
         )
         progress.s_vig = threshold.s_vig
@@ -311,14 +319,42 @@ def run_learn(c: Conductor) -> dict:
             "band_low": low,
             "band_high": high,
             "map_change": learned.change,
+            "success_winner": learned.success_winner,
+            "failure_winner": learned.failure_winner,
         }
         c.record_trial(progress, trial_id, result, wall, c.point(v), learning)
-    finish: m.Ack = c.call(m.Finish(path=str((c.run_dir / "acc.npz").resolve()), prune=proto.prune_failure_map))
+    maps = (c.run_dir / "acc.npz").resolve()
+    finish: m.Ack = c.call(m.Finish(path=str(maps), prune=proto.prune_failure_map))
     return {
         "planned_trials": proto.trials,
         "stalled": stalled,
         "stop_reason": stop_reason,
         "acc": finish.detail,
+        "best": best_parameters(c, maps, best),
+    }
+
+
+def best_parameters(c: Conductor, maps: Path, best: tuple[float, int, np.ndarray] | None) -> dict | None:
+    """"After learning, the optimal parameter is presented by the success map neuron that is closed to the trial with
+    maximum reward in training set" (L1584): that neuron (index, unit weights, physical values) beside the trial
+    (index, eta, unit and physical values). None without a success, or without the maps' checkpoint (an ACC of
+    one's own may keep none)."""
+    if best is None or not maps.exists():
+        return None
+    eta, trial, v = best
+    with np.load(maps) as data:
+        if "success_weights" not in data.files:
+            return None
+        weights, active = data["success_weights"], data["success_active"]
+    candidates = np.flatnonzero(active)
+    neuron = int(candidates[np.argmin(np.linalg.norm(weights[candidates] - v, axis=1))])
+    axes = c.plan.scenario.space
+    return {
+        "trial": trial,
+        "trial_eta": eta,
+        "trial_point": point_fields(axes, v),
+        "neuron": neuron,
+        "neuron_point": point_fields(axes, weights[neuron]),
     }
 
 

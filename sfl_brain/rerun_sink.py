@@ -68,6 +68,21 @@ def _strips3d(strips) -> np.ndarray | list[np.ndarray]:
     return [_z0(s) for s in strips]
 
 
+def _reward_colours(values: np.ndarray, active: np.ndarray, colour: np.ndarray) -> np.ndarray:
+    """One snapshot's neurons with a learnt reward coloured on viridis from the map's lowest (dark) to its highest
+    (yellow); the others keep ``colour``."""
+    import matplotlib
+
+    known = active & np.isfinite(values)
+    if not known.any():
+        return colour
+    low, high = float(values[known].min()), float(values[known].max())
+    share = (values[known] - low) / (high - low) if high > low else np.ones(int(known.sum()))
+    out = colour.copy()
+    out[known] = (np.asarray(matplotlib.colormaps["viridis"](share))[:, :3] * 255).astype(np.uint8)
+    return out
+
+
 class RerunTelemetry:
     """Send a module's telemetry to a Rerun recording stream under ``entity/``.
 
@@ -248,6 +263,14 @@ class RerunTelemetry:
         points, strips = rr.Points3D, rr.LineStrips3D
         active = item.active.reshape(-1)
         colour = np.where(active[:, None], item.color, _GREY).astype(np.uint8)  # switched-off neurons in grey
+        if item.values is not None:  # the success map coloured by the reward each neuron learnt (QARL, Fig. 5.9)
+            values = np.asarray(item.values, dtype=float).reshape(k, size)
+            colour = np.concatenate(
+                [
+                    _reward_colours(values[i], active[i * size : (i + 1) * size], colour[i * size : (i + 1) * size])
+                    for i in range(k)
+                ]
+            )
         neurons, grid = f"{self._path(item)}/neurons", f"{self._path(item)}/edges"
         self._style_once(neurons, points.from_fields(radii=np.full(size, 0.008, np.float32)))
         self.recording.send_columns(

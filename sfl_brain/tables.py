@@ -66,6 +66,8 @@ TRIAL_COLUMNS: tuple[Column, ...] = (
     Column("band_low", _f8, "", "lower edge of the vigilance band after the trial"),
     Column("band_high", _f8, "", "upper edge of the vigilance band after the trial"),
     Column("map_change", _f8, "unit space", "how far the learnt map moved on this trial"),
+    Column("success_winner", _i8, "", "the success map's winning neuron for the trial's point, before it learnt"),
+    Column("failure_winner", _i8, "", "the failure map's winning neuron for the trial's point, before it learnt"),
     Column("worker", pa.string(), "", "the body worker that ran the trial"),
     Column("wall_ms", _f8, "ms", "wall time of the trial, request to result (not reproducible)"),
     Column("v_unit", pa.list_(_f8), "unit space", "the tried point, one coordinate in [0, 1] per axis"),

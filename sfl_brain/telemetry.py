@@ -109,7 +109,8 @@ class MapSnapshots:
     """A self-organising map after each of ``trials`` (trial timeline): its neurons' weights
     ``(k, size, dim)`` in the unit space, which are active ``(k, size)``, and its grid edges
     ``(k, edges, 2, dim)``. ``final``: the maps as the run leaves them (after pruning, thesis
-    §4.4.3), at the last trial's index."""
+    §4.4.3), at the last trial's index. ``values``: a value per neuron to colour it by (the success map's learnt
+    reward, Fig. 5.9), or None."""
 
     path: str
     trials: np.ndarray
@@ -118,6 +119,8 @@ class MapSnapshots:
     edges: np.ndarray
     color: tuple[int, int, int]
     final: bool = False
+    #: each neuron's learnt reward ``(k, size)`` (QARL: the eta it learnt; NaN where none), shown as its colour
+    values: np.ndarray | None = None
 
 
 Telemetry = Scalars | Strips2D | Arrows2D | Boxes3D | Event | MapSnapshots
