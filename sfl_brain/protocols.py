@@ -335,7 +335,7 @@ def run_learn(c: Conductor) -> dict:
 
 
 def best_parameters(c: Conductor, maps: Path, best: tuple[float, int, np.ndarray] | None) -> dict | None:
-    """"After learning, the optimal parameter is presented by the success map neuron that is closed to the trial with
+    """ "After learning, the optimal parameter is presented by the success map neuron that is closed to the trial with
     maximum reward in training set" (L1584): that neuron (index, unit weights, physical values) beside the trial
     (index, eta, unit and physical values). None without a success, or without the maps' checkpoint (an ACC of
     one's own may keep none)."""
