@@ -32,6 +32,7 @@ import yaml  # noqa: E402
 from .records import read_records, run_status, summarise  # noqa: E402
 from .report_conditions import conditions_section, is_conditions_run  # noqa: E402
 from .report_cpg import cpg_run, is_cpg_run, write_cpg_sections  # noqa: E402
+from .report_sweep import is_grid_sweep, sweep_section  # noqa: E402
 
 
 def _figure(run_dir: Path, out: Path, scenario: dict, rows: list[dict]) -> str:
@@ -164,6 +165,7 @@ def write_report(run_dirs: list[Path], out: Path) -> Path:
     statuses: dict[str, dict] = {}
     cpg_results: list[dict] = []
     conditions: dict[str, tuple[dict, list[Path], list[str]]] = {}  # scenario name -> (scenario, completed, left out)
+    sweep_lines: list[str] = []
     summaries: dict[str, dict] = {}
     lines = [
         "| run | status | protocol | s_vig | trials | success rate | thesis | figure |",
@@ -187,6 +189,9 @@ def write_report(run_dirs: list[Path], out: Path) -> Path:
                 entry[1].append(run_dir)
             else:
                 entry[2].append(f"{run_dir.name}: {status}, {why}")
+            figure = ""
+        elif is_grid_sweep(scenario) and scenario["modules"].get("controller", {}).get("impl") == "cpg":
+            sweep_lines += sweep_section(run_dir, out, scenario, rows)
             figure = ""
         elif is_cpg_run(scenario):
             cpg_results.append(cpg_run(run_dir, out, scenario, status))
@@ -222,6 +227,7 @@ def write_report(run_dirs: list[Path], out: Path) -> Path:
             vigilance_lines += [f"- {text}" for text in left_out[group]]
     unfinished = [d for d, st in statuses.items() if st["status"] != "completed"]
     vigilance_lines += write_cpg_sections(cpg_results) if cpg_results else []
+    vigilance_lines += [""] + sweep_lines if sweep_lines else []
     for scenario, completed_runs, skipped in conditions.values():
         vigilance_lines += [""] + conditions_section(scenario, completed_runs, skipped, out)
     names = sorted({r["scenario"] for r in cpg_results})
