@@ -18,11 +18,14 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
 
 
 def is_grid_sweep(scenario: dict) -> bool:
     return scenario.get("protocol", {}).get("kind") == "sweep" and len(scenario.get("space", [])) in (2, 3)
+
+
+#: how a failure ended, as the figure marks it
+ENDINGS = (("F", "fell"), ("L", "left the lane"), ("T", "timed out"), ("S", "stood"), ("x", "other"))
 
 
 def _ending(row: dict) -> str:
@@ -94,7 +97,7 @@ def sweep_section(run_dir: Path, out: Path, scenario: dict, rows: list[dict]) ->
         f"{successes} of {len(trials)} cells succeed ({successes / len(trials):.0%}). Failures: "
         + ", ".join(
             f"{label} {sum(1 for r in trials if _ending(r) == code)}"
-            for code, label in (("F", "fell"), ("L", "left the lane"), ("T", "timed out"), ("S", "stood"), ("x", "other"))
+            for code, label in ENDINGS
             if any(_ending(r) == code for r in trials)
         )
         + ".",
