@@ -3,7 +3,8 @@ others, so that learning them has both outcomes to learn from; and the learning 
 
 The two cells are from the grid of docs/results/chapter4/e4_2_grid.md, each inside a block of like cells: (2.5, 3.125)
 walks and so do its four grid neighbours; (5, 2.5), a fast oscillator (period about 0.7 s), falls and so do its
-neighbours (5, 1.88) and (5, 3.12) (its other neighbour, (4.38, 2.5), walks since the PF reads tanh(V / A_f)). Controller and body run in one process with the scenario's own parameters.
+neighbours (5, 1.88) and (5, 3.12) (its other neighbour, (4.38, 2.5), walks since the PF reads tanh(V / A_f)).
+Controller and body run in one process with the scenario's own parameters.
 """
 
 from __future__ import annotations

@@ -69,6 +69,8 @@ KNEE_TARGET_BOUNDED = 0.27
 def targets(pf_input: str) -> dict[str, float]:
     """``TARGETS`` for a circuit whose PF reads ``pf_input`` (``potential`` or ``bounded``)."""
     return {**TARGETS, "knee": KNEE_TARGET_BOUNDED} if pf_input == "bounded" else dict(TARGETS)
+
+
 DT = 0.01  # s, the control tick
 SECONDS, WINDOW = 10.0, 4.0  # s: kinematic run, and its last part measured
 
