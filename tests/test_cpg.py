@@ -207,11 +207,12 @@ def test_pattern_formation_motor_and_sensory_neurons_by_hand():
     assert network.command()[0] == pytest.approx(1.0 * (MN_E - MN_F), abs=1e-12)
 
 
-def test_the_static_layers_are_the_readable_equations_exactly():
+@pytest.mark.parametrize("pf_input", ["potential", "bounded"])
+def test_the_static_layers_are_the_readable_equations_exactly(pf_input):
     """The tick computes PF, MN and the sensory neurons with prepared constants (halved slopes, one dot for both
     synaptic tables); ``sensory_neuron``, ``averaged_input``, ``pattern_formation`` and ``motor_neuron`` (the equations
-    as written) give the same bits."""
-    network = CPGNetwork(load_circuit("planar_8link"))
+    as written) give the same bits, with the PF fed V or tanh(V / A_f) (the circuit's ``pf_input``)."""
+    network = CPGNetwork(apply_overrides(read_circuit_data("planar_8link"), {"pf_input": pf_input}))
     network.set_descending(alpha_mlr=0.7, theta_mlr=0.2, joints=["ankle_l"])
     rng = np.random.default_rng(5)
     for _ in range(30):
@@ -221,8 +222,10 @@ def test_the_static_layers_are_the_readable_equations_exactly():
         network.advance(phi)
     rho = sensory_neuron(phi[network._sensor_input], network._sensor_alpha, network._sensor_theta)
     signed = network.theta_mlr_signed
+    V = network.y[:, 0]
+    rg_output = np.tanh(V / network.A_f) if pf_input == "bounded" else V  # what the PF reads of its RG (4.10)
     pf = pattern_formation(
-        averaged_input(network._w_rg2pf, network.y[:, 0], network._w_pf, rho, network._n_pf),
+        averaged_input(network._w_rg2pf, rg_output, network._w_pf, rho, network._n_pf),
         network.pf_alpha,
         network.alpha_mlr,
         network.pf_theta,
