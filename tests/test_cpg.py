@@ -207,11 +207,12 @@ def test_pattern_formation_motor_and_sensory_neurons_by_hand():
     assert network.command()[0] == pytest.approx(1.0 * (MN_E - MN_F), abs=1e-12)
 
 
-def test_the_static_layers_are_the_readable_equations_exactly():
+@pytest.mark.parametrize("pf_input", ["potential", "bounded"])
+def test_the_static_layers_are_the_readable_equations_exactly(pf_input):
     """The tick computes PF, MN and the sensory neurons with prepared constants (halved slopes, one dot for both
     synaptic tables); ``sensory_neuron``, ``averaged_input``, ``pattern_formation`` and ``motor_neuron`` (the equations
-    as written) give the same bits."""
-    network = CPGNetwork(load_circuit("planar_8link"))
+    as written) give the same bits, with the PF fed V or tanh(V / A_f) (the circuit's ``pf_input``)."""
+    network = CPGNetwork(apply_overrides(read_circuit_data("planar_8link"), {"pf_input": pf_input}))
     network.set_descending(alpha_mlr=0.7, theta_mlr=0.2, joints=["ankle_l"])
     rng = np.random.default_rng(5)
     for _ in range(30):
@@ -221,8 +222,10 @@ def test_the_static_layers_are_the_readable_equations_exactly():
         network.advance(phi)
     rho = sensory_neuron(phi[network._sensor_input], network._sensor_alpha, network._sensor_theta)
     signed = network.theta_mlr_signed
+    V = network.y[:, 0]
+    rg_output = np.tanh(V / network.A_f) if pf_input == "bounded" else V  # what the PF reads of its RG (4.10)
     pf = pattern_formation(
-        averaged_input(network._w_rg2pf, network.y[:, 0], network._w_pf, rho, network._n_pf),
+        averaged_input(network._w_rg2pf, rg_output, network._w_pf, rho, network._n_pf),
         network.pf_alpha,
         network.alpha_mlr,
         network.pf_theta,
@@ -253,11 +256,24 @@ DOCUMENTED = {
 PERIODS = {(1.0, 2.0): 2.25, (2.0, 2.0): 1.25, (5.0, 2.0): 0.69}
 
 
-@pytest.fixture(scope="module")
-def single_cell_runs():
+#: the PF of the energy test: fed V with slope 1 (the planar hip's before issue 23, and sfl report's), and fed
+#: tanh(V / A_f) with the planar hip's slope now (the circuit's ``pf_input: bounded``)
+ENERGY_PF = {
+    "V, slope 1": {"pf_input": "potential", "pf_alpha": 1.0},
+    "planar hip": {
+        "pf_input": load_circuit("planar_8link").pf_input,
+        "pf_alpha": load_circuit("planar_8link").joints[0].pf.alpha,
+    },
+}
+
+
+@pytest.fixture(scope="module", params=list(ENERGY_PF))
+def single_cell_runs(request):
     """Every documented point as one batch: the joint's E and F uncoupled (the digest's single cell), 20 s."""
     points = list(DOCUMENTED)
-    traces = simulate_one_joint([p[0] for p in points], [p[1] for p in points], duration=20.0, rg_mutual=0.0)
+    traces = simulate_one_joint(
+        [p[0] for p in points], [p[1] for p in points], duration=20.0, rg_mutual=0.0, **ENERGY_PF[request.param]
+    )
     return points, traces
 
 
@@ -272,7 +288,8 @@ def test_each_pattern_class_from_its_documented_parameters(single_cell_runs):
 
 def test_energy_orders_plateau_quiescent_almost_oscillators_by_frequency(single_cell_runs):
     """Fig. 4.16 (L1298): plateau < quiescent < almost-oscillator < oscillators, by frequency; the joint angle
-    theta = MN_E - MN_F, 10 s from the end of the kick (§7.13), PF slope 1 (the planar circuit's)."""
+    theta = MN_E - MN_F, 10 s from the end of the kick (§7.13), the PF fed V with slope 1 and fed tanh(V / A_f) with
+    the planar hip's slope (``ENERGY_PF``)."""
     points, traces = single_cell_runs
     start = int(round(KICK_DURATION / DT))
     log_e = log_energy(traces["angle"][start : start + 1001], DT)
@@ -284,6 +301,24 @@ def test_energy_orders_plateau_quiescent_almost_oscillators_by_frequency(single_
     oscillators = sorted((p.frequency, log_e[n]) for n, p in enumerate(kinds) if p.kind == OSCILLATOR)
     assert max(by_class[ALMOST_OSCILLATOR]) < oscillators[0][1]
     assert [e for _, e in oscillators] == sorted(e for _, e in oscillators)
+
+
+@pytest.mark.parametrize(
+    ("pf_input", "pf_alpha", "ahead_at_plus", "ahead_at_minus"),
+    [("potential", 1.0, (0.49, 0.51), (0.46, 0.48)), ("bounded", 8.6, (0.61, 0.63), (0.35, 0.37))],
+)
+def test_theta_mlr_dominates_when_the_pf_reads_the_bounded_rg_output(pf_input, pf_alpha, ahead_at_plus, ahead_at_minus):
+    """Fig. 4.6, L1160: theta_MLR = +0.5 extensor, -0.5 flexor domination (joint (2, 2), E and F coupled by -1, the
+    planar hip's PF slopes before and since issue 23). Fed V (+-5.5) the 0.5 shift hardly moves the duty cycle (MN_E
+    ahead 50% / 47% of the time); fed tanh(V / A_f) it does (62% / 36%), and the joint keeps oscillating
+    (docs/results/chapter4/e4_1_patterns.md)."""
+    out = simulate_one_joint(
+        [2.0] * 2, [2.0] * 2, duration=10.0, rg_mutual=-1.0, theta_mlr=[0.5, -0.5], pf_alpha=pf_alpha, pf_input=pf_input
+    )
+    e, f = out["MN_E"][400:], out["MN_F"][400:]  # after a 4-s transient
+    ahead = np.mean(e > f, axis=0)
+    assert ahead_at_plus[0] < ahead[0] < ahead_at_plus[1] and ahead_at_minus[0] < ahead[1] < ahead_at_minus[1], ahead
+    assert np.all(np.ptp(e - f, axis=0) > 1.5)  # still oscillating: MN_E - MN_F swings over most of [-1, 1]
 
 
 def test_energy_is_the_integral_of_the_squared_angular_velocity():

@@ -3,7 +3,9 @@ others, so that learning them has both outcomes to learn from; and the learning 
 
 The two cells are from the grid of docs/results/chapter4/e4_2_grid.md, each inside a block of like cells: (2.5, 3.125)
 walks and so do its four grid neighbours; (5, 2.5), a fast oscillator (period about 0.7 s), falls and so do its
-neighbours. Controller and body run in one process with the scenario's own parameters.
+neighbours (5, 1.88) and (5, 3.12). Since the PF reads tanh(V / A_f) (issue 23) it falls at 5.8 s, not at 1.2 s
+as with the PF fed V, and its neighbour (4.38, 2.5) walks.
+Controller and body run in one process with the scenario's own parameters.
 """
 
 from __future__ import annotations
@@ -38,7 +40,7 @@ def test_a_walking_pattern_walks_10_s_and_a_fast_one_falls():
     assert walked.metrics["steps"] >= 2
     assert walked.metrics["distance"] > 2.0  # forward, m: walking, not shuffling on the spot
     fell = trial(5.0, 2.5)
-    assert not fell.success and fell.metrics["fell"] and fell.metrics["fell_at"] < 5.0
+    assert not fell.success and fell.metrics["fell"] and fell.metrics["fell_at"] < 7.0  # 5.8 s (e4_2_grid.md)
 
 
 def test_the_learning_scenario_checks():

@@ -51,7 +51,8 @@ def test_the_default_gait_walks_the_15_m_from_perturbed_starts():
 def test_at_t0_the_cpg_commands_the_standing_pose():
     """theta0 makes up for what the reflexes command at rest (they are not symmetric about the standing angles): the
     first command is the body's standing pose, but for the ankle pitches, whose kick starts at t = 0 (10 ms of it
-    moved them by 0.009 rad)."""
+    moves them by 0.012 rad: the PF's slope at V = 0 is 8 / (5 x 5) = 0.32 per unit of V with the bounded input and PF
+    alpha 8, times the gain 1.14; it was 0.009 rad on V, 1 / 5 = 0.2 per unit, times 1.29)."""
     body = Humanoid(Humanoid.Params(duration=0.01))
     body.link = InProcessLink(CPGController(CPGParams(**scenario_modules()["controller"]["params"])))
     commands = []
@@ -62,7 +63,7 @@ def test_at_t0_the_cpg_commands_the_standing_pose():
     standing = np.array([STANDING[name] for name in JOINT_NAMES])
     at_rest = [k for k, name in enumerate(JOINT_NAMES) if not name.startswith("ankle_pitch")]
     np.testing.assert_allclose(commands[0][at_rest], standing[at_rest], atol=1e-4)
-    np.testing.assert_allclose(commands[0], standing, atol=0.01)
+    np.testing.assert_allclose(commands[0], standing, atol=0.015)
 
 
 def test_sfl_run_walks_over_processes_and_records_success_eta_and_the_bodys_boxes(tmp_path):
