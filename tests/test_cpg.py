@@ -435,12 +435,13 @@ def test_phase_reset_pulses_on_heel_strike_and_can_be_switched_off():
     before, after = {}, {}
     for enabled in (True, False):
         network = CPGNetwork(circuit)
+        network.set_phase_reset("pulse")  # the circuit's own entries reset state (tests/test_cpg_phase_reset.py)
         network.phase_reset_enabled[:] = enabled
         sensors = np.zeros(len(circuit.inputs))
-        for tick in range(60):
-            sensors[heel] = 200.0 if tick >= 50 else 0.0  # heel strike at tick 50
+        for tick in range(260):  # the circuit's resets fire after the start-up (its entries' `after`: 2 s)
+            sensors[heel] = 200.0 if tick >= 250 else 0.0  # heel strike at tick 250
             network.advance(sensors)
-            if tick == 49:
+            if tick == 249:
                 before[enabled] = network.membrane_potential
         after[enabled] = network.membrane_potential
     np.testing.assert_array_equal(before[True], before[False])

@@ -191,8 +191,9 @@ def test_phase_reset_on_a_rising_heel_contact_shifts_the_phase():
     the new phase; with phase_reset off the heel strike changes nothing."""
     strike = 185  # tick: the left hip RG-E is below rest (flexion) from tick 129 to 197 without a reset
     onsets, V = {}, {}
+    early = {"phase_resets": {"0": {"after": 0.0}, "1": {"after": 0.0}}}  # the shipped entries wait 2 s: not here
     for enabled in (True, False):
-        controller = CPGController(CPGParams(phase_reset=enabled))
+        controller = CPGController(CPGParams(phase_reset="pulse" if enabled else "off", circuit_overrides=early))
         reads, _ = start(controller)
         sensors, hip_v = np.zeros(len(reads)), []
         for t in range(600):

@@ -18,6 +18,13 @@ STATE = {"hip_l": {"E": [1.5, -0.5], "F": [-2.0, 0.25]}, "knee_l": {"E": [0.75, 
 STRIKES = (0.5, 1.5, 1.56, 2.5)  # s: heel_l rises at each (1.56: the heel bouncing 60 ms after landing at 1.5)
 
 
+#: the planar circuit's phase resets as they were before issue 23: pulses written without the new fields
+PULSES = [
+    {"sensor": "GB_l", "joint": "hip_l", "amplitude": -1.0, "duration": 0.04, "threshold": 0.5, "enabled": True},
+    {"sensor": "GB_r", "joint": "hip_r", "amplitude": -1.0, "duration": 0.04, "threshold": 0.5, "enabled": True},
+]
+
+
 def reset_entry(**fields) -> dict:
     entry = {"sensor": "GB_l", "joint": "hip_l", "mode": "state", "joints": ["hip_l", "knee_l"], "state": STATE}
     return {**entry, "refractory": 0.2, "after": 1.0, **fields}
@@ -107,7 +114,7 @@ def test_the_trial_mode_makes_every_reset_a_pulse_a_state_reset_or_none_and_rese
 
 
 def test_pulse_entries_written_with_the_new_fields_at_their_defaults_are_the_old_ones_bit_for_bit():
-    plain = read_circuit_data("planar_8link")["phase_resets"]
+    plain = PULSES
     explicit = [{**r, "mode": "pulse", "refractory": 0.0, "after": 0.0} for r in plain]
     rng = np.random.default_rng(5)
     old, new = CPGNetwork(planar_with(*plain)), CPGNetwork(planar_with(*explicit))

@@ -19,16 +19,18 @@ from sfl_brain.scenario import ScenarioError
 ANKLES = ["ankle_pitch_l", "ankle_pitch_r"]
 
 
-def first_tick_on_a_ramp(overrides: dict, slope_deg: float = 10.0) -> tuple[np.ndarray, np.ndarray]:
+def first_tick_on_a_ramp(
+    overrides: dict, slope_deg: float = 10.0, controller_params: dict | None = None, noise: float = 0.0, ticks: int = 1
+) -> tuple[np.ndarray, np.ndarray]:
     """The humanoid standing on a ramp with the humanoid_nao CPG: (the first frame's joint angles, the first
     command), both in JOINT_NAMES order (rad)."""
-    body = Humanoid(Humanoid.Params(duration=0.01, slope_deg=slope_deg))
+    body = Humanoid(Humanoid.Params(duration=0.01 * ticks, slope_deg=slope_deg, start_noise=noise))
     body.link = InProcessLink(CPGController(CPGParams(circuit="humanoid_nao", circuit_overrides=overrides)))
     frames, commands = [], []
     sense, actuate = body.sense, body.actuate
     body.sense = lambda: frames.append(sense()) or frames[-1]
     body.actuate = lambda command: (commands.append(np.array(command)), actuate(command))
-    body.handle(TrialRequest(trial_id=0, seed=0, body_params={}, controller_params={}, log=False))
+    body.handle(TrialRequest(trial_id=0, seed=0, body_params={}, controller_params=controller_params or {}, log=False))
     body.close()
     return frames[0][: len(JOINT_NAMES)], commands[0]
 
@@ -83,3 +85,18 @@ def test_start_from_pose_names_position_joints_with_angles():
     assert (
         str(err.value) == "c.yaml: start_from_pose.0: expected no joints for a voltage command (position circuits only)"
     )
+
+
+def test_a_ramp_start_shifts_the_ankles_calibrated_pose_by_the_slope_and_keeps_no_start_noise():
+    """The shipped humanoid circuit's start_slope: given the slope it starts on (start_slope_deg), the first command is
+    the standing pose on that ramp; the start's own noise is not taken into the commands (start_from_pose would keep
+    it as an ankle offset for the whole walk)."""
+    pose, command = first_tick_on_a_ramp({}, controller_params={"start_slope_deg": 10.0})
+    np.testing.assert_allclose(command, pose, atol=0.01)  # every joint, the ankles included
+    ankles = [JOINT_NAMES.index(name) for name in ANKLES]
+    np.testing.assert_allclose(command[ankles], -0.35 - np.radians(10.0), atol=1e-9)
+    noisy_pose, noisy = first_tick_on_a_ramp({}, controller_params={"start_slope_deg": 10.0}, noise=0.05)
+    assert np.abs(noisy_pose[ankles] - pose[ankles]).max() > 0.01  # the start differs ...
+    np.testing.assert_allclose(noisy[ankles], command[ankles], atol=1e-9)  # ... the ankle commands do not
+    with pytest.raises(ValueError, match="start_slope_deg: circuit planar_8link has no start_slope joints to shift"):
+        CPGController(CPGParams(circuit="planar_8link")).configure({"start_slope_deg": 5.0}, 0)

@@ -75,7 +75,9 @@ def test_the_module_parameter_takes_true_false_and_the_modes():
         "s.yaml: modules.controller.params.phase_reset: expected one of 'off', 'pulse', 'state' or 'circuit'; "
         "got 'stat' (did you mean `state`?)"
     ]
-    assert scenario_problems({"phase_reset": "state"}) == [  # the shipped circuit's resets are pulses, no states
+    assert CPGParams(phase_reset="state").phase_reset == "state"  # the shipped circuit stores its stance states
+    pulses = [{"sensor": f"GB_{side}", "joint": f"hip_{side}"} for side in "lr"]  # resets with no state
+    assert scenario_problems({"phase_reset": "state", "circuit_overrides": {"phase_resets": pulses}}) == [
         "s.yaml: modules.controller.params.phase_reset: expected a stance-onset state for every joint of every phase "
         "reset of circuit planar_8link ('state'); none for phase_resets.0 ['hip_l'], phase_resets.1 ['hip_r']"
     ]
@@ -123,8 +125,10 @@ def test_trial_values_are_checked_with_and_without_the_module_parameters():
     with pytest.raises(ValueError) as err:  # configure says what check_trial_param says
         start(CPGController(params), params={"switch": "hip"})
     assert str(err.value) == message
+    check("phase_reset", "state", params)  # the shipped circuit stores its stance states
+    no_states = {"phase_resets": [{"sensor": f"GB_{side}", "joint": f"hip_{side}"} for side in "lr"]}
     with pytest.raises(ValueError) as err:
-        check("phase_reset", "state", params)
+        check("phase_reset", "state", CPGParams(switches=PRESETS, circuit_overrides=no_states))
     assert str(err.value).startswith("phase_reset: expected a stance-onset state for every joint")
 
 

@@ -41,7 +41,9 @@ reset per trial.
   ("off", "pulse", "state", "circuit"; default: the parameter ``phase_reset``); ``switch`` ("none": no pattern switch
   at all this trial, not even the circuit file's own; a preset's name: that preset only; default: the circuit's own
   switches and the parameter ``switch``); ``switch_at`` (s: the armed time-triggered switch fires at this time
-  instead of its ``at``, so a protocol can put the switch where its push is: the conditions protocol's ``follow``).
+  instead of its ``at``, so a protocol can put the switch where its push is: the conditions protocol's ``follow``);
+  ``start_slope_deg`` (the ground slope the trial starts on: the circuit's ``start_slope`` joints start from their
+  calibrated pose shifted by it, so that command and pose agree at t = 0 on a ramp).
 
 On logged trials every neuron is shown on ``sim_time``: per joint and side (E, F) RG V and q, PF and MN, then the
 sensory neurons (``CPGNetwork.neuron_names``).
@@ -67,7 +69,7 @@ from sfl_brain.scenario import ScenarioError
 from sfl_brain.telemetry import Event
 
 #: what a trial may set (see the module docstring)
-TRIAL_PARAMS = ("sigma_s", "sigma_f", "alpha_mlr", "theta_mlr", "phase_reset", "switch", "switch_at")
+TRIAL_PARAMS = ("sigma_s", "sigma_f", "alpha_mlr", "theta_mlr", "phase_reset", "switch", "switch_at", "start_slope_deg")
 #: how the circuit's phase resets act (``phase_reset``, module and trial parameter)
 PHASE_RESET_MODES = CPGNetwork.PHASE_RESET_MODES
 
@@ -343,6 +345,8 @@ class CPGController(Controller):
             network.arm_switches([] if choice == "none" else [self.preset_index[choice]])
         if "switch_at" in params:  # the armed switch's time trigger, moved to this trial's time (e.g. its push)
             network.set_switch_time(float(params["switch_at"]))
+        if "start_slope_deg" in params:  # circuit start_slope: the start pose shifted by the slope it starts on
+            network.set_start_slope(math.radians(float(params["start_slope_deg"])))
 
     def step(self, sensors: np.ndarray) -> np.ndarray:
         self.network.advance(sensors, self._control_dt, self.params.substeps)
@@ -371,6 +375,12 @@ def _check_trial_value(name: str, value, circuit: Circuit | None, presets: list[
         lacking = circuit.state_reset_problem() if circuit is not None and value == "state" else ""
         if lacking:
             raise ValueError(f"phase_reset: {lacking}")
+        return
+    if name == "start_slope_deg":
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or abs(value) > 45:
+            raise ValueError(f"start_slope_deg: expected a slope in deg within +-45; got {value!r}")
+        if circuit is not None and not circuit.start_slope:
+            raise ValueError(f"start_slope_deg: circuit {circuit.name} has no start_slope joints to shift")
         return
     if name == "switch_at":
         if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or value < 0:

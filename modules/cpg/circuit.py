@@ -35,6 +35,7 @@ Layout of a file (see ``circuits/*.yaml``; CPG-HUMANOID.md is "the digest" below
                                        # or input: ..., rate_above: ... (a push detector); inhibit: [[hip_l, knee_l]]
                                        # theta0: continuous | angle; kick_direction: fixed | motion
     start_from_pose: [ankle_pitch_l]   # position circuits: these joints' command equals the measured pose at t = 0
+    start_slope: {ankle_pitch_l: -1.0} # position circuits: start pose0 + k slope when a trial gives its slope
 
 Current pulses (kicks, phase resets, switch kicks) follow the author's code sign convention (digest
 §5): ``amplitude`` is the current injected into the flexor RG, the extensor RG receives its negative.
@@ -111,6 +112,8 @@ class Joint(Strict):
     gain: Number = 1.0  # M of (3.6) (voltage) or G of theta_0 + G (MN_E - MN_F) (position)
     theta0: Number = 0.0  # position command offset, rad
     angle_input: Name | None = None  # input holding this joint's angle (switches, start_from_pose)
+    # position circuits: the joint's angle at the start the gain and theta0 were calibrated for (rad; start_slope)
+    pose0: Number | None = None
 
 
 class SensoryNeuron(Strict):
@@ -249,6 +252,12 @@ class Circuit(Strict):
     # measured angle - G (MN_E - MN_F) with that tick's MN (as a continuous switch), so that their command equals the
     # pose the body starts in (e.g. the humanoid's ankles, pitched by a ramp). Chosen here, not in the thesis.
     start_from_pose: list[Name] = []
+    # position circuits (issue 23 item 2): joint -> how its start angle changes per rad of ground slope (the humanoid
+    # starts on a ramp with its ankles pitched by -slope). When a trial gives the start's slope (the controller's trial
+    # parameter start_slope_deg), at its first tick each listed joint's theta_0 := pose0 + k slope - G (MN_E - MN_F)
+    # with that tick's MN: its command is the calibrated start pose shifted by the slope, whatever the start's own
+    # noise (which start_from_pose would keep as an offset for the whole trial). Chosen here, not in the thesis.
+    start_slope: dict[Name, Number] = {}
 
     def joint_index(self, name: str) -> int:
         return [j.name for j in self.joints].index(name)
@@ -411,6 +420,14 @@ def _reference_problems(c: Circuit) -> list[Problem]:
         if name in joints and c.joints[joints.index(name)].angle_input is None:
             out.append(Problem(path, f"expected a joint with an `angle_input` (its measured pose); {name!r} has none"))
     unique("start_from_pose", list(c.start_from_pose), key="")
+    for name in c.start_slope:
+        path = f"start_slope.{name}"
+        if c.command != "position":
+            out.append(Problem(path, f"expected no joints for a {c.command} command (position circuits only)"))
+            break
+        need(path, name, joints, "joints")
+        if name in joints and c.joints[joints.index(name)].pose0 is None:
+            out.append(Problem(path, f"expected a joint with a `pose0` (its calibrated start pose); {name!r} has none"))
     return out
 
 

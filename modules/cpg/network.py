@@ -290,6 +290,10 @@ class CPGNetwork:
             (circuit.joint_index(name), circuit.inputs.index(circuit.joints[circuit.joint_index(name)].angle_input))
             for name in circuit.start_from_pose
         ]
+        self._start_slope_joints = [
+            (circuit.joint_index(name), circuit.joints[circuit.joint_index(name)].pose0, per_slope)
+            for name, per_slope in circuit.start_slope.items()
+        ]
 
         # buffers of the RK4 hot path (_integrate): a stage's input z = [V, q, tanh(sigma_f V / A_f), tanh(V / A_f)]
         # per copy; the state y = [V, q] is the first half of stage 1's buffer, so stage 1 reads it in place
@@ -428,6 +432,11 @@ class CPGNetwork:
                 raise ValueError(f"switch index {i}: expected one below {len(self.circuit.switches)}")
         self._pending_switches = [i for i in chosen if not self._switched[:, i].all()]
 
+    def set_start_slope(self, slope: float) -> None:
+        """This trial starts on ground sloping ``slope`` rad (uphill +): at its first tick the circuit's ``start_slope``
+        joints command their calibrated start pose shifted by it (``reset`` forgets it)."""
+        self._start_slope = float(slope)
+
     def set_switch_time(self, at: float) -> None:
         """Fire this trial's armed time-triggered switches at ``at`` s instead of their ``at`` (``reset`` restores it):
         how a trial puts a switch where its push is (E4.4, E4.7)."""
@@ -462,6 +471,7 @@ class CPGNetwork:
         self._hold_at_switch: list[tuple[np.ndarray, int, np.ndarray]] = []
         self._pending_switches = [i for i, s in enumerate(self.circuit.switches) if s.armed]
         self._switch_at: dict[int, float] = {}  # switch index -> this trial's time for its trigger `at`
+        self._start_slope: float | None = None  # rad: the slope this trial starts on, if a trial says (set_start_slope)
         #: the pattern switches so far (§7.11), in order
         self.switch_events: list[SwitchEvent] = []
         ns = len(self.sensor_names)
@@ -563,9 +573,15 @@ class CPGNetwork:
         else:
             phi[...] = sensors
         rho = _logistic(self._sensor_half_alpha, phi[:, self._sensor_input] - self._sensor_theta)  # (4.13) L1133
-        if self.tick == 0 and self._start_from_pose:  # circuit start_from_pose: the command starts at the pose
+        if self.tick == 0 and (self._start_from_pose or self._start_slope is not None):
             every = np.ones(self.batch, dtype=bool)
+            # circuit start_from_pose: the command starts at the measured pose
             self._hold_at_switch.extend((every, j, phi[:, source].copy()) for j, source in self._start_from_pose)
+            if self._start_slope is not None:  # circuit start_slope: the calibrated pose shifted by the slope
+                self._hold_at_switch.extend(
+                    (every, j, np.full(self.batch, pose0 + k * self._start_slope))
+                    for j, pose0, k in self._start_slope_joints
+                )
         self._phase_resets(rho)
         if self._pending_switches:
             self._switches(phi, control_dt)
