@@ -49,7 +49,10 @@ caption; separate maps for flat, 10 deg up and 10 deg down, §5.7; switching whi
 - ``gain_pitch``, ``gain_roll`` (trial parameters, >= 0; 1 = the calibrated gait): multiply the gain G of every joint
   of the circuit's ``gain_groups`` pitch / roll (theta_cmd = theta_0 + G (MN_E - MN_F)). The digest (§7.8) reads "one
   G for all pitch joints, one for both roll joints"; our gait is calibrated with one G per joint (circuit file), so one
-  multiplier per group is the faithful reading. w3 is ``sigma_s`` above (sigma_f stays the circuit's, §7.8).
+  multiplier per group is the faithful reading. The multiplier scales the drive about its value at rest (the
+  reflexes' offset on the trial's first frame; ``CPGNetwork.set_gain_multiplier``): the oscillation grows or shrinks,
+  the resting pose stays the calibrated one, as G does in the author's code whose reflexes are off (digest §5); 0
+  stands the robot still. w3 is ``sigma_s`` above (sigma_f stays the circuit's, §7.8).
 - ``posture_gain`` (1/s, >= 0; 0 = off): the gain of the circuit's ``posture`` term, the torso held about 10 deg from
   the vertical by shifting the ankle pitches' theta_0 (L1764, §7.18; circuit.py ``Posture``); default the circuit's.
 - the terrain switch (§5.8): the controller walks with the trial's ``gain_pitch``, ``gain_roll``, ``sigma_s`` and,
@@ -522,7 +525,7 @@ def terrain_switch_text(event) -> str:
     """One line saying what a terrain switch did (§5.8)."""
 
     def number(value) -> str:
-        return f"{value:g}" if np.ndim(value) == 0 else "[" + ", ".join(f"{v:g}" for v in np.ravel(value)) + "]"
+        return f"{value:.4g}" if np.ndim(value) == 0 else "[" + ", ".join(f"{v:.4g}" for v in np.ravel(value)) + "]"
 
     how = "at once" if event.mode == "at_once" else f"gradually over {event.seconds:g} s"
     moves = ", ".join(f"{name} {number(event.old[name])} -> {number(new)}" for name, new in event.new.items())
