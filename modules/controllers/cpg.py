@@ -529,7 +529,9 @@ def terrain_switch_text(event) -> str:
 
     how = "at once" if event.mode == "at_once" else f"gradually over {event.seconds:g} s"
     moves = ", ".join(f"{name} {number(event.old[name])} -> {number(new)}" for name, new in event.new.items())
-    return f"terrain switch ({how}): {event.input} {number(event.value)} rad {event.when} {event.threshold:g}; {moves}"
+    return (
+        f"terrain switch ({how}): {event.input} {number(event.value)} rad {event.when} {event.threshold:.4g}; {moves}"
+    )
 
 
 def switch_text(event) -> str:
