@@ -222,8 +222,10 @@ class CPGParams(ModuleParams):
     switches: dict[str, PatternSwitch] = Field(
         {}, description="named switch presets; a trial arms one by its name (trial parameter switch)"
     )
-    terrain_input: str = Field(
-        "torso_pitch", description="the circuit input a terrain switch watches (§5.8: the torso pitch, rad)"
+    terrain_input: str | None = Field(
+        None,
+        description="the circuit input a terrain switch watches (§5.8: the torso pitch, rad); none: torso_pitch "
+        "(checked when a trial switches: the planar circuit has none)",
     )
     terrain_switch_after: float = Field(
         3.0,
@@ -311,7 +313,7 @@ class CPGParams(ModuleParams):
                 problems.append(
                     (("switches", key, "trigger"), "expected 'time' or 'push' (a preset fires on one); got 'none'")
                 )
-        if "terrain_input" in self.model_fields_set:  # the default is checked when a trial switches (planar: none)
+        if self.terrain_input is not None:  # the default is checked when a trial switches (the planar circuit has none)
             need(("terrain_input",), self.terrain_input, inputs, f"inputs of circuit {circuit.name}")
         lacking = circuit.state_reset_problem()
         if self.phase_reset == "state" and lacking:
@@ -319,6 +321,11 @@ class CPGParams(ModuleParams):
         if problems:
             raise _invalid(problems, self.model_dump(mode="json"))
         return self
+
+    @property
+    def watched_input(self) -> str:
+        """The input a terrain switch watches: ``terrain_input``, or the torso pitch."""
+        return self.terrain_input if self.terrain_input is not None else "torso_pitch"
 
     def build_circuit(self) -> Circuit:
         """The circuit the controller runs: the file, its overrides, the pattern switch (armed when a trial does not
@@ -376,7 +383,7 @@ class CPGController(Controller):
         needs_circuit = name in ("phase_reset", "posture_gain", "terrain_switch", *GAIN_PARAMS)
         circuit = params.build_circuit() if params is not None and needs_circuit else None
         presets = list(params.switches) if params is not None else None
-        _check_trial_value(name, value, circuit, presets, params.terrain_input if params is not None else None)
+        _check_trial_value(name, value, circuit, presets, params.watched_input if params is not None else None)
 
     def configure(self, params: dict, seed: int) -> None:
         unknown = [k for k in params if k not in TRIAL_PARAMS]
@@ -385,7 +392,7 @@ class CPGController(Controller):
             tail = f" (did you mean `{hint}`?)" if hint else ""
             raise ValueError(f"CPGController takes trial parameters {list(TRIAL_PARAMS)}; got {unknown}{tail}")
         for name, value in params.items():
-            _check_trial_value(name, value, self.circuit, list(self.preset_index), self.params.terrain_input)
+            _check_trial_value(name, value, self.circuit, list(self.preset_index), self.params.watched_input)
         _check_terrain_switch(params)
         msg = self.trial  # the base sets it before configure (None when configured by hand, e.g. in a test)
         self._control_dt = msg.dt if msg is not None else 0.01
@@ -415,7 +422,7 @@ class CPGController(Controller):
         if mode != "off":  # §5.8: another condition's parameters when the torso pitch says the terrain changed
             p = self.params
             network.arm_terrain_switch(
-                p.terrain_input,
+                p.watched_input,
                 float(params["switch_threshold"]),
                 params["switch_when"],
                 mode=mode,
