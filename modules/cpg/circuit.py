@@ -37,7 +37,7 @@ Layout of a file (see ``circuits/*.yaml``; CPG-HUMANOID.md is "the digest" below
     start_from_pose: [ankle_pitch_l]   # position circuits: these joints' command equals the measured pose at t = 0
     gain_groups: {pitch: [hip_pitch_l, ...], roll: [hip_roll_l, ...]}   # ch. 5's learnt MN gains (w1, w2, L1631): a
                                        # trial's gain_pitch / gain_roll multiply the G of every joint of the group
-    posture: {input: torso_pitch, target: 0.1745, gain: 0.5, joints: {ankle_pitch_l: 1, ankle_pitch_r: 1},
+    posture: {input: torso_pitch, target: 0.1745, gain: 0.1, joints: {ankle_pitch_l: 1, ankle_pitch_r: 1},
               limit: 0.15}             # position circuits: the torso held near target (L1764): a slow integral
                                        # term on the joints' theta_0, d theta_0 / dt = gain sign (input - target)
 
