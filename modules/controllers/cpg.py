@@ -45,6 +45,29 @@ reset per trial.
   ``start_slope_deg`` (the ground slope the trial starts on: the circuit's ``start_slope`` joints start from their
   calibrated pose shifted by it, so that command and pose agree at t = 0 on a ramp).
 
+Chapter 5 (the humanoid learns w1 = MN gain in pitch, w2 = MN gain in roll, w3 = sigma_s, L1631 and Fig. 5.9's
+caption; separate maps for flat, 10 deg up and 10 deg down, §5.7; switching while walking, §5.8 L1759-1766):
+
+- ``gain_pitch``, ``gain_roll`` (trial parameters, >= 0; 1 = the calibrated gait): multiply the gain G of every joint
+  of the circuit's ``gain_groups`` pitch / roll (theta_cmd = theta_0 + G (MN_E - MN_F)). The digest (§7.8) reads "one
+  G for all pitch joints, one for both roll joints"; our gait is calibrated with one G per joint (circuit file), so one
+  multiplier per group is the faithful reading. The multiplier scales the drive about its value at rest (the
+  reflexes' offset on the trial's first frame; ``CPGNetwork.set_gain_multiplier``): the oscillation grows or shrinks,
+  the resting pose stays the calibrated one, as G does in the author's code whose reflexes are off (digest §5); 0
+  stands the robot still. w3 is ``sigma_s`` above (sigma_f stays the circuit's, §7.8).
+- ``posture_gain`` (1/s, >= 0; 0 = off): the gain of the circuit's ``posture`` term, the torso held about 10 deg from
+  the vertical by shifting the ankle pitches' theta_0 (L1764, §7.18; circuit.py ``Posture``); default the circuit's.
+- the terrain switch (§5.8): the controller walks with the trial's ``gain_pitch``, ``gain_roll``, ``sigma_s`` and,
+  when the terrain changes, moves to ``next_gain_pitch``, ``next_gain_roll``, ``next_sigma_s`` (the new condition's
+  best neuron, physical values; one not given stays as it is). ``terrain_switch``: "off" (default), "at_once" (in one
+  tick) or "gradual" (linearly over the module parameter ``switch_seconds``, one cycle of the flat gait, §7.17); it
+  fires once, the first tick at or after the module parameter ``terrain_switch_after`` (s: the start-up transient
+  must not fire it) when the input ``terrain_input`` (the torso pitch, rad) is at or ``switch_when`` ("above",
+  "below") ``switch_threshold`` (rad; the experiment derives it from the flat gait's torso oscillation, §7.17: mean
+  +- 1.5 x half range). The thesis detects "when the torso reaches previously defined threshold" (L1759): a level,
+  not a rising edge. On logged trials the switch is a telemetry event ``events/terrain_switch``; the network keeps
+  it (``network.terrain_switch_events``).
+
 On logged trials every neuron is shown on ``sim_time``: per joint and side (E, F) RG V and q, PF and MN, then the
 sensory neurons (``CPGNetwork.neuron_names``).
 """
@@ -69,7 +92,30 @@ from sfl_brain.scenario import ScenarioError
 from sfl_brain.telemetry import Event
 
 #: what a trial may set (see the module docstring)
-TRIAL_PARAMS = ("sigma_s", "sigma_f", "alpha_mlr", "theta_mlr", "phase_reset", "switch", "switch_at", "start_slope_deg")
+TRIAL_PARAMS = (
+    "sigma_s",
+    "sigma_f",
+    "alpha_mlr",
+    "theta_mlr",
+    "phase_reset",
+    "switch",
+    "switch_at",
+    "gain_pitch",
+    "gain_roll",
+    "posture_gain",
+    "terrain_switch",
+    "switch_threshold",
+    "switch_when",
+    "next_gain_pitch",
+    "next_gain_roll",
+    "next_sigma_s",
+    "start_slope_deg",
+)
+#: the group gain multipliers a trial may set (ch. 5's w1, w2): trial parameter -> the circuit's gain group
+GAIN_PARAMS = {"gain_pitch": "pitch", "gain_roll": "roll", "next_gain_pitch": "pitch", "next_gain_roll": "roll"}
+#: what ``terrain_switch`` and ``switch_when`` take
+TERRAIN_SWITCH_MODES = ("off", *CPGNetwork.TERRAIN_SWITCH_MODES)
+TERRAIN_SWITCH_WHEN = CPGNetwork.TERRAIN_SWITCH_WHEN
 #: how the circuit's phase resets act (``phase_reset``, module and trial parameter)
 PHASE_RESET_MODES = CPGNetwork.PHASE_RESET_MODES
 
@@ -179,6 +225,22 @@ class CPGParams(ModuleParams):
     switches: dict[str, PatternSwitch] = Field(
         {}, description="named switch presets; a trial arms one by its name (trial parameter switch)"
     )
+    terrain_input: str | None = Field(
+        None,
+        description="the circuit input a terrain switch watches (§5.8: the torso pitch, rad); none: torso_pitch "
+        "(checked when a trial switches: the planar circuit has none)",
+    )
+    terrain_switch_after: float = Field(
+        3.0,
+        ge=0,
+        description="s of trial time before which no terrain switch fires (the start-up transient; not in the thesis)",
+    )
+    switch_seconds: float = Field(
+        0.667,
+        gt=0,
+        description="s over which a gradual terrain switch moves the parameters: one cycle of the flat gait (§7.17; "
+        "the shipped humanoid gait's period is 0.667 s, 1.5 Hz)",
+    )
 
     @field_validator("phase_reset", mode="before")
     @classmethod
@@ -254,12 +316,19 @@ class CPGParams(ModuleParams):
                 problems.append(
                     (("switches", key, "trigger"), "expected 'time' or 'push' (a preset fires on one); got 'none'")
                 )
+        if self.terrain_input is not None:  # the default is checked when a trial switches (the planar circuit has none)
+            need(("terrain_input",), self.terrain_input, inputs, f"inputs of circuit {circuit.name}")
         lacking = circuit.state_reset_problem()
         if self.phase_reset == "state" and lacking:
             problems.append((("phase_reset",), lacking))
         if problems:
             raise _invalid(problems, self.model_dump(mode="json"))
         return self
+
+    @property
+    def watched_input(self) -> str:
+        """The input a terrain switch watches: ``terrain_input``, or the torso pitch."""
+        return self.terrain_input if self.terrain_input is not None else "torso_pitch"
 
     def build_circuit(self) -> Circuit:
         """The circuit the controller runs: the file, its overrides, the pattern switch (armed when a trial does not
@@ -314,9 +383,10 @@ class CPGController(Controller):
         """Raise ValueError if ``value`` cannot be trial parameter ``name`` (``sfl check`` calls this). Without
         ``params`` the type and the allowed strings are checked; with the module's ``params`` also what depends on
         them: that a ``switch`` preset exists, that the circuit's phase resets store states for "state"."""
-        circuit = params.build_circuit() if params is not None and name == "phase_reset" else None
+        needs_circuit = name in ("phase_reset", "posture_gain", "terrain_switch", *GAIN_PARAMS)
+        circuit = params.build_circuit() if params is not None and needs_circuit else None
         presets = list(params.switches) if params is not None else None
-        _check_trial_value(name, value, circuit, presets)
+        _check_trial_value(name, value, circuit, presets, params.watched_input if params is not None else None)
 
     def configure(self, params: dict, seed: int) -> None:
         unknown = [k for k in params if k not in TRIAL_PARAMS]
@@ -325,7 +395,8 @@ class CPGController(Controller):
             tail = f" (did you mean `{hint}`?)" if hint else ""
             raise ValueError(f"CPGController takes trial parameters {list(TRIAL_PARAMS)}; got {unknown}{tail}")
         for name, value in params.items():
-            _check_trial_value(name, value, self.circuit, list(self.preset_index))
+            _check_trial_value(name, value, self.circuit, list(self.preset_index), self.params.watched_input)
+        _check_terrain_switch(params)
         msg = self.trial  # the base sets it before configure (None when configured by hand, e.g. in a test)
         self._control_dt = msg.dt if msg is not None else 0.01
         log = msg is not None and msg.log and self.telemetry is not None
@@ -347,6 +418,25 @@ class CPGController(Controller):
             network.set_switch_time(float(params["switch_at"]))
         if "start_slope_deg" in params:  # circuit start_slope: the start pose shifted by the slope it starts on
             network.set_start_slope(math.radians(float(params["start_slope_deg"])))
+        for name in ("gain_pitch", "gain_roll"):  # ch. 5's w1, w2 (L1631): multipliers of the groups' gains
+            if name in params:
+                network.set_gain_multiplier(GAIN_PARAMS[name], float(params[name]))
+        if "posture_gain" in params:  # the torso held near 10 deg (L1764)
+            network.set_posture_gain(float(params["posture_gain"]))
+        mode = params.get("terrain_switch", "off")
+        if mode != "off":  # §5.8: another condition's parameters when the torso pitch says the terrain changed
+            p = self.params
+            network.arm_terrain_switch(
+                p.watched_input,
+                float(params["switch_threshold"]),
+                params["switch_when"],
+                mode=mode,
+                seconds=p.switch_seconds,
+                after=p.terrain_switch_after,
+                gains={GAIN_PARAMS[k]: float(params[k]) for k in ("next_gain_pitch", "next_gain_roll") if k in params},
+                sigma_s=float(params["next_sigma_s"]) if "next_sigma_s" in params else None,
+                sigma_joints=self._pattern_joints,
+            )
 
     def step(self, sensors: np.ndarray) -> np.ndarray:
         self.network.advance(sensors, self._control_dt, self.params.substeps)
@@ -362,11 +452,31 @@ class CPGController(Controller):
             trial_id, t0 = log
             for event in self.network.switch_events:
                 self.telemetry.emit(Event("events/pattern_switch", trial_id, t0 + event.time, switch_text(event)))
+            for event in self.network.terrain_switch_events:
+                self.telemetry.emit(
+                    Event("events/terrain_switch", trial_id, t0 + event.time, terrain_switch_text(event))
+                )
         super().flush_neurons()
 
 
-def _check_trial_value(name: str, value, circuit: Circuit | None, presets: list[str] | None) -> None:
-    """``check_trial_param`` and ``configure``'s check: ``circuit`` and ``presets`` None when not known."""
+def _check_trial_value(
+    name: str, value, circuit: Circuit | None, presets: list[str] | None, terrain_input: str | None = None
+) -> None:
+    """``check_trial_param`` and ``configure``'s check: ``circuit``, ``presets`` and ``terrain_input`` (the module
+    parameter) None when not known."""
+    if name in ("terrain_switch", "switch_when"):
+        allowed = TERRAIN_SWITCH_MODES if name == "terrain_switch" else TERRAIN_SWITCH_WHEN
+        if not isinstance(value, str) or value not in allowed:
+            hint = nearest(value, allowed) if isinstance(value, str) else None
+            tail = f" (did you mean {hint!r}?)" if hint else ""
+            raise ValueError(f"{name}: expected one of {list(allowed)}; got {value!r}{tail}")
+        if name == "terrain_switch" and value != "off" and circuit is not None and terrain_input is not None:
+            if terrain_input not in circuit.inputs:
+                raise ValueError(
+                    f"terrain_switch: expected the circuit {circuit.name} to have the input {terrain_input!r} "
+                    f"(module parameter terrain_input) to watch; its inputs are {circuit.inputs}"
+                )
+        return
     if name == "phase_reset":
         if not isinstance(value, str) or value not in PHASE_RESET_MODES:
             hint = nearest(value, PHASE_RESET_MODES) if isinstance(value, str) else None
@@ -396,8 +506,50 @@ def _check_trial_value(name: str, value, circuit: Circuit | None, presets: list[
         return
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         raise ValueError(f"{name}: expected a finite number; got {value!r}")
-    if name in ("sigma_s", "sigma_f") and value < 0:
+    if name in ("sigma_s", "sigma_f", "next_sigma_s") and value < 0:
         raise ValueError(f"{name}: expected a number >= 0 (Table 4.1: [0, 5]); got {value!r}")
+    if name in GAIN_PARAMS:
+        if value < 0:
+            raise ValueError(f"{name}: expected a multiplier of the calibrated gains >= 0 (1: the gait); got {value!r}")
+        group = GAIN_PARAMS[name]
+        if circuit is not None and group not in circuit.gain_groups:
+            raise ValueError(
+                f"{name}: expected circuit {circuit.name} to have the gain group {group!r} (circuit key gain_groups); "
+                f"it has {list(circuit.gain_groups)}"
+            )
+    if name == "posture_gain":
+        if value < 0:
+            raise ValueError(f"posture_gain: expected a gain in 1/s >= 0 (0: off); got {value!r}")
+        if circuit is not None and circuit.posture is None:
+            raise ValueError(f"posture_gain: expected circuit {circuit.name} to have a posture (circuit key posture)")
+
+
+def _check_terrain_switch(params: dict) -> None:
+    """What a terrain switch needs besides each value's own check (``configure``; one value alone cannot say)."""
+    mode = params.get("terrain_switch", "off")
+    if mode == "off":
+        return
+    missing = [k for k in ("switch_threshold", "switch_when") if k not in params]
+    if missing:
+        raise ValueError(f"terrain_switch {mode!r}: expected the trial parameters {missing} too; got none")
+    if not any(k in params for k in ("next_gain_pitch", "next_gain_roll", "next_sigma_s")):
+        raise ValueError(
+            f"terrain_switch {mode!r}: expected at least one of next_gain_pitch, next_gain_roll, next_sigma_s "
+            "(the new condition's parameters); got none"
+        )
+
+
+def terrain_switch_text(event) -> str:
+    """One line saying what a terrain switch did (§5.8)."""
+
+    def number(value) -> str:
+        return f"{value:.4g}" if np.ndim(value) == 0 else "[" + ", ".join(f"{v:.4g}" for v in np.ravel(value)) + "]"
+
+    how = "at once" if event.mode == "at_once" else f"gradually over {event.seconds:g} s"
+    moves = ", ".join(f"{name} {number(event.old[name])} -> {number(new)}" for name, new in event.new.items())
+    return (
+        f"terrain switch ({how}): {event.input} {number(event.value)} rad {event.when} {event.threshold:.4g}; {moves}"
+    )
 
 
 def switch_text(event) -> str:

@@ -36,6 +36,11 @@ Layout of a file (see ``circuits/*.yaml``; CPG-HUMANOID.md is "the digest" below
                                        # theta0: continuous | angle; kick_direction: fixed | motion
     start_from_pose: [ankle_pitch_l]   # position circuits: these joints' command equals the measured pose at t = 0
     start_slope: {ankle_pitch_l: -1.0} # position circuits: start pose0 + k slope when a trial gives its slope
+    gain_groups: {pitch: [hip_pitch_l, ...], roll: [hip_roll_l, ...]}   # ch. 5's learnt MN gains (w1, w2, L1631): a
+                                       # trial's gain_pitch / gain_roll multiply the G of every joint of the group
+    posture: {input: torso_pitch, target: 0.1745, gain: 0.1, joints: {ankle_pitch_l: 1, ankle_pitch_r: 1},
+              limit: 0.15}             # position circuits: the torso held near target (L1764): a slow integral
+                                       # term on the joints' theta_0, d theta_0 / dt = gain sign (input - target)
 
 Current pulses (kicks, phase resets, switch kicks) follow the author's code sign convention (digest
 §5): ``amplitude`` is the current injected into the flexor RG, the extensor RG receives its negative.
@@ -228,6 +233,26 @@ class Switch(Strict):
     armed: bool = True  # armed at a trial's start (a controller's presets are not: it arms the one a trial chooses)
 
 
+class Posture(Strict):
+    """Keeping the torso at an angle from the vertical (L1764: "The inertial sensor is also used to adjust the center
+    of oscillation of ankle joints in order to keep the robot torso close to the vertical with a small inclination in
+    the walking sense. For the NAO robot, we keep this angle closed to 10 deg"; digest §7.18): a slow integral term on
+    the listed joints' command offsets. Every control tick of dt s
+
+        shift_j += gain * sign_j * (input - target) * dt,   clipped to [-limit, +limit];   theta_0,j = file's + shift_j
+
+    so a torso leaning past ``target`` moves the joints' oscillation centre by ``sign`` until it is back (the thesis
+    gives neither the gain nor how the ankles move: chosen here). ``input``: the circuit input holding the angle
+    (rad); ``gain``: 1/s (0: off; a trial may set another, ``posture_gain``); ``limit``: rad, the most the offsets
+    move either way."""
+
+    input: Name
+    target: Number  # rad: L1764's 10 deg is 0.1745
+    gain: NonNegative  # 1/s
+    joints: dict[Name, Literal[-1, 1]] = Field(min_length=1)  # joint -> the sign of its shift per rad of lean
+    limit: Positive  # rad
+
+
 class Circuit(Strict):
     """A whole MLMP-CPG: what the network is built from."""
 
@@ -258,6 +283,12 @@ class Circuit(Strict):
     # with that tick's MN: its command is the calibrated start pose shifted by the slope, whatever the start's own
     # noise (which start_from_pose would keep as an offset for the whole trial). Chosen here, not in the thesis.
     start_slope: dict[Name, Number] = {}
+    # ch. 5's learnt motor-neuron gains (L1631, Fig. 5.9 caption: "w1 is motor neuron gain in pitch, w2 is motor neuron
+    # gain in roll"): the joints of each group, whose gains a trial scales together (trial parameters gain_pitch,
+    # gain_roll: multipliers of each joint's own calibrated gain; digest §7.8). A joint is in at most one group.
+    gain_groups: dict[Literal["pitch", "roll"], list[Name]] = {}
+    # position circuits: the torso held near an angle by the joints' offsets (L1764, digest §7.18; ``Posture``)
+    posture: Posture | None = None
 
     def joint_index(self, name: str) -> int:
         return [j.name for j in self.joints].index(name)
@@ -428,6 +459,21 @@ def _reference_problems(c: Circuit) -> list[Problem]:
         need(path, name, joints, "joints")
         if name in joints and c.joints[joints.index(name)].pose0 is None:
             out.append(Problem(path, f"expected a joint with a `pose0` (its calibrated start pose); {name!r} has none"))
+    owner: dict[str, str] = {}
+    for group, members in c.gain_groups.items():
+        for n, name in enumerate(members):
+            path = f"gain_groups.{group}.{n}"
+            need(path, name, joints, "joints")
+            if name in owner:
+                where = "twice in this group" if owner[name] == group else f"already in group {owner[name]!r}"
+                out.append(Problem(path, f"expected a joint in at most one gain group; got {name!r} {where}"))
+            owner.setdefault(name, group)
+    if c.posture is not None:
+        if c.command != "position":
+            out.append(Problem("posture", f"expected none for a {c.command} command (position circuits only)"))
+        need("posture.input", c.posture.input, c.inputs, "inputs")
+        for name in c.posture.joints:
+            need(f"posture.joints.{name}", name, joints, "joints")
     return out
 
 

@@ -42,6 +42,20 @@ Choices where the thesis is silent (CPG-HUMANOID.md, "the digest", §7), followe
   ours, whose reflexes hold MN_E - MN_F away from 0, that makes the command jump by the reflexes' offset. A kick's
   sign is given, or (``kick_direction: motion``, issue 23's E4.4) follows the way the joint moves.
 
+Chapter 5 (the humanoid's learnt parameters, L1631; slopes and switching, §5.7-5.8 L1737-1766):
+
+- the motor-neuron gains (w1 in pitch, w2 in roll, Fig. 5.9 caption): the circuit's ``gain_groups`` name the joints of
+  each group, and ``set_gain_multiplier`` scales every gain G of a group by one number (1 = the calibrated gait). The
+  thesis has one G per group (§7.8); our gait is calibrated with one G per joint, so a common multiplier is the faithful
+  reading of "one G for all pitch joints, one for both roll joints";
+- the torso held about 10 deg from the vertical (L1764, §7.18): the circuit's ``posture``, a slow integral term on the
+  named joints' theta_0 (``Posture`` in circuit.py; ``set_posture_gain``), applied at the end of each tick;
+- switching parameters while walking when the terrain changes (§5.8, L1759-1766; §7.17): ``arm_terrain_switch``
+  moves the group gains and sigma_s from their values to new ones, at once or linearly over some seconds, when an
+  input (the torso pitch) reaches a threshold after a start-up time; once per trial (``terrain_switch_events``).
+
+Nothing of these costs a tick when off: one test each in ``advance``.
+
 What is continuous and what is sampled: the RG states (V, q) and the RG-RG synapses (a function of V)
 are integrated with RK4. The injected currents (kicks, phase-reset and switching pulses) and the sensory
 neurons are sampled once per control tick and held over its sub-steps (the body's sensors only change
@@ -164,6 +178,51 @@ class PhaseResetEvent:
     copies: np.ndarray
 
 
+@dataclass(frozen=True)
+class TerrainSwitchEvent:
+    """A terrain switch that happened (§5.8, L1759-1766): at ``time`` (s of CPG time, the start of the tick) the input
+    ``input`` was ``value`` (rad for the torso pitch; per switched copy, an array, when copies differ), ``when``
+    ("above" or "below") ``threshold``, and the parameters started to move from ``old`` to ``new`` (names:
+    ``gain_pitch``, ``gain_roll``: multipliers of the groups' gains; ``sigma_s``), ``mode`` "at_once" (in that tick)
+    or "gradual" (linearly, reaching ``new`` at ``time + seconds``). ``copies``: which batch copies switched."""
+
+    time: float
+    input: str
+    value: float | np.ndarray
+    threshold: float
+    when: str
+    mode: str
+    seconds: float
+    old: dict[str, float | np.ndarray]
+    new: dict[str, float]
+    copies: np.ndarray
+
+    @property
+    def end_time(self) -> float:
+        """s: when the parameters reach their new values (``time`` for "at_once")."""
+        return self.time + self.seconds
+
+
+class _TerrainSwitch:
+    """An armed terrain switch (``CPGNetwork.arm_terrain_switch``) and its progress per batch copy."""
+
+    def __init__(self, network: CPGNetwork, input: str, threshold, when, after, mode, seconds, gains, sigma_s, joints):
+        b = network.batch
+        self.input_name, self.input = input, network.circuit.inputs.index(input)
+        self.threshold, self.above, self.when = float(threshold), when == "above", when
+        self.after, self.mode = float(after), mode
+        self.seconds = float(seconds) if mode == "gradual" else 0.0
+        self.gains = dict(gains)  # group -> its new multiplier
+        self.sigma_s = sigma_s  # its new value, or None: unchanged
+        idx = network._joint_indices(joints)
+        self.sigma_columns = np.concatenate([2 * idx + E, 2 * idx + F])
+        self.fired = np.zeros(b, dtype=bool)
+        self.done = np.zeros(b, dtype=bool)
+        self.start = np.zeros(b)  # s: each copy's switch time
+        self.old_gains = {group: np.ones(b) for group in self.gains}  # each copy's values at its switch
+        self.old_sigma = np.zeros((b, len(self.sigma_columns)))
+
+
 class ResetTrigger:
     """When phase resets fire (§7.10), one column per ``phase_resets`` entry: its sensory neuron rising through
     ``threshold`` (below it last tick, at or above it now), once per landing: not within ``refractory`` s of that
@@ -254,7 +313,17 @@ class CPGNetwork:
 
         self.mn_alpha, self.mn_theta = circuit.motor_neuron.alpha, circuit.motor_neuron.theta
         self._mn_half_slope = 0.5 * self.mn_alpha  # halved for _logistic
-        self.gain = np.array([j.gain for j in circuit.joints])
+        self._circuit_gain = np.array([j.gain for j in circuit.joints])  # the calibrated G per joint
+        #: group name (pitch, roll) -> its joints' indices (circuit ``gain_groups``; ch. 5's w1, w2)
+        self.gain_groups = {
+            group: np.array([circuit.joint_index(name) for name in names], dtype=int)
+            for group, names in circuit.gain_groups.items()
+        }
+        posture = circuit.posture  # the torso held near an angle (L1764, §7.18): (input, joints, signs, target, limit)
+        if posture is not None:
+            self._posture_input = circuit.inputs.index(posture.input)
+            self._posture_joints = np.array([circuit.joint_index(name) for name in posture.joints], dtype=int)
+            self._posture_signs = np.array([float(sign) for sign in posture.joints.values()])
         self._angle_input = [
             None if j.angle_input is None else circuit.inputs.index(j.angle_input) for j in circuit.joints
         ]
@@ -368,6 +437,10 @@ class CPGNetwork:
         self.phase_reset_enabled = np.array([r.enabled for r in self.circuit.phase_resets], dtype=bool)
         self.phase_reset_as_state = np.array([r.mode == "state" for r in self.circuit.phase_resets], dtype=bool)
         self.theta0 = np.tile([j.theta0 for j in joints], (b, 1))
+        self._gain = np.tile(self._circuit_gain, (b, 1))
+        #: group -> its gain multiplier per batch copy (1 = the circuit's gains)
+        self.gain_multipliers = {group: np.ones(b) for group in self.gain_groups}
+        self.posture_gain = self.circuit.posture.gain if self.circuit.posture is not None else 0.0  # 1/s
         self.coupling = self._circuit_coupling.copy()
         self._update_coefficients()
         self._update_pattern_formation()
@@ -382,6 +455,98 @@ class CPGNetwork:
         self.sigma_in[:, cols] = self.sigma_s[:, cols]
         self.sigma_out[:, cols] = self.sigma_s[:, cols]
         self._update_coefficients()
+
+    def set_gain_multiplier(self, group: str, value) -> None:
+        """Ch. 5's learnt MN gain of a group (w1 pitch, w2 roll, L1631): every joint of ``gain_groups[group]`` gets its
+        circuit gain times ``value`` (one number or one per batch copy; 1 = the calibrated gait) until ``reset``.
+
+        A position command scales the motor neurons' drive about its value at rest: theta_cmd = theta_0 + G D_rest +
+        value G (D - D_rest), D = MN_E - MN_F, D_rest = D with every RG at rest on the trial's first frame (the
+        reflexes' offset; ``_drive_at_rest``). So the command at rest is the calibrated one (the circuit's theta_0 is
+        calibrated so that it is the standing pose) whatever the multiplier, and the multiplier scales the oscillation
+        only, as G does in the author's code, whose reflexes are off (D_rest = 0, digest §5). Literally (theta_0 +
+        value G D) it would also move every joint's resting angle by (value - 1) G D_rest: the knees by 0.5 rad at
+        1.5, and 0 would collapse the robot instead of standing it. A voltage command is scaled as it is."""
+        if group not in self.gain_groups:
+            raise ValueError(
+                f"gain_{group}: expected a gain group of circuit {self.circuit.name} (gain_groups "
+                f"{list(self.gain_groups)}); it has no {group!r}"
+            )
+        values = np.broadcast_to(np.asarray(value, dtype=float), (self.batch,))
+        self._set_gains(group, values, np.arange(self.batch))
+
+    def _set_gains(self, group: str, values: np.ndarray, rows: np.ndarray) -> None:
+        """The group's multipliers of the copies ``rows`` := ``values`` (one per such copy), and their gains."""
+        cols = self.gain_groups[group]
+        cells = np.ix_(rows, cols)
+        gain = values[:, None] * self._circuit_gain[cols]
+        if self._rest_drive is not None:  # mid-trial: the drive at rest keeps its command (see set_gain_multiplier)
+            self.theta0[cells] += (self._gain[cells] - gain) * self._rest_drive[cells]
+        self.gain_multipliers[group][rows] = values
+        self._gain[cells] = gain
+
+    @property
+    def gain(self) -> np.ndarray:
+        """G per joint (M of (3.6) or G of theta_0 + G (MN_E - MN_F)) after the group multipliers, (joints,) or (batch,
+        joints)."""
+        return self._gain if self.batched else self._gain[0]
+
+    def set_posture_gain(self, gain: float) -> None:
+        """The posture term's gain, 1/s, until ``reset`` (which restores the circuit's); 0 = off (L1764, §7.18)."""
+        if self.circuit.posture is None:
+            raise ValueError(f"posture_gain: circuit {self.circuit.name} has no posture (circuit key `posture`)")
+        if not (np.isfinite(gain) and gain >= 0):
+            raise ValueError(f"posture_gain: expected a gain in 1/s >= 0; got {gain!r}")
+        self.posture_gain = float(gain)
+
+    @property
+    def posture_shift(self) -> np.ndarray:
+        """The posture term's accumulated shift of its joints' theta_0, rad, in ``posture.joints`` order ((batch, n)
+        when batched); empty without a posture."""
+        return self._posture_shift.copy() if self.batched else self._posture_shift[0].copy()
+
+    #: what ``arm_terrain_switch`` takes
+    TERRAIN_SWITCH_MODES = ("at_once", "gradual")
+    TERRAIN_SWITCH_WHEN = ("above", "below")
+
+    def arm_terrain_switch(
+        self,
+        input: str,
+        threshold: float,
+        when: str,
+        mode: str = "at_once",
+        seconds: float = 0.0,
+        after: float = 0.0,
+        gains: dict[str, float] | None = None,
+        sigma_s: float | None = None,
+        sigma_joints: list[str] | None = None,
+    ) -> None:
+        """Switch parameters once this trial when the terrain changes (§5.8, L1759-1766): from ``after`` s on, the first
+        tick whose ``input`` (e.g. the torso pitch, rad) is at or ``when`` ("above", "below") ``threshold`` starts
+        moving the group gain multipliers ``gains`` (group -> new value) and the RG's sigma_s of ``sigma_joints``
+        (default all; None: unchanged) from their values at that tick to the new ones: ``mode`` "at_once" in that
+        tick, "gradual" linearly over ``seconds`` (the thesis's "switching occurs gradually", L1766). Per batch copy.
+        ``reset`` disarms it; the switches are in ``terrain_switch_events``."""
+        if input not in self.circuit.inputs:
+            raise ValueError(
+                f"terrain switch input: expected one of the inputs of circuit {self.circuit.name} "
+                f"{self.circuit.inputs}; got {input!r}"
+            )
+        if when not in self.TERRAIN_SWITCH_WHEN:
+            raise ValueError(f"switch_when: expected one of {list(self.TERRAIN_SWITCH_WHEN)}; got {when!r}")
+        if mode not in self.TERRAIN_SWITCH_MODES:
+            raise ValueError(f"terrain_switch: expected one of {list(self.TERRAIN_SWITCH_MODES)}; got {mode!r}")
+        if mode == "gradual" and not seconds > 0:
+            raise ValueError(f"switch_seconds: expected a duration in s > 0 for a gradual switch; got {seconds!r}")
+        for group in gains or {}:
+            if group not in self.gain_groups:
+                raise ValueError(
+                    f"next_gain_{group}: expected a gain group of circuit {self.circuit.name} (gain_groups "
+                    f"{list(self.gain_groups)}); it has no {group!r}"
+                )
+        self._terrain = _TerrainSwitch(
+            self, input, threshold, when, after, mode, seconds, gains or {}, sigma_s, sigma_joints
+        )
 
     def set_descending(self, alpha_mlr=None, theta_mlr=None, joints: list[str] | None = None) -> None:
         """Descending (MLR) control of the named joints' PF neurons (4.9); theta_MLR with the signs of §7.6."""
@@ -474,6 +639,12 @@ class CPGNetwork:
         self._start_slope: float | None = None  # rad: the slope this trial starts on, if a trial says (set_start_slope)
         #: the pattern switches so far (§7.11), in order
         self.switch_events: list[SwitchEvent] = []
+        posture = self.circuit.posture
+        self._posture_shift = np.zeros((b, 0 if posture is None else len(posture.joints)))  # rad, L1764
+        self._terrain: _TerrainSwitch | None = None  # an armed terrain switch (§5.8), until it has done its work
+        self._rest_drive: np.ndarray | None = None  # MN_E - MN_F at rest on the first frame (set_gain_multiplier)
+        #: the terrain switches so far (§5.8): at most one per copy and trial
+        self.terrain_switch_events: list[TerrainSwitchEvent] = []
         ns = len(self.sensor_names)
         self._sensory = np.zeros((b, ns))
         self._pf = np.zeros((b, self.n_neurons))
@@ -573,18 +744,13 @@ class CPGNetwork:
         else:
             phi[...] = sensors
         rho = _logistic(self._sensor_half_alpha, phi[:, self._sensor_input] - self._sensor_theta)  # (4.13) L1133
-        if self.tick == 0 and (self._start_from_pose or self._start_slope is not None):
-            every = np.ones(self.batch, dtype=bool)
-            # circuit start_from_pose: the command starts at the measured pose
-            self._hold_at_switch.extend((every, j, phi[:, source].copy()) for j, source in self._start_from_pose)
-            if self._start_slope is not None:  # circuit start_slope: the calibrated pose shifted by the slope
-                self._hold_at_switch.extend(
-                    (every, j, np.full(self.batch, pose0 + k * self._start_slope))
-                    for j, pose0, k in self._start_slope_joints
-                )
+        if self.tick == 0:
+            self._first_tick(phi, rho)
         self._phase_resets(rho)
         if self._pending_switches:
             self._switches(phi, control_dt)
+        if self._terrain is not None:
+            self._terrain_switch(phi)
         self._constant = self._per_tick_constant()
         self._integrate(control_dt / substeps, substeps)
         self.tick += 1
@@ -595,6 +761,8 @@ class CPGNetwork:
         self._outputs(rho)
         if self._hold_at_switch:
             self._hold_commands()
+        if self.posture_gain:
+            self._posture(phi, control_dt)
         return self._per_joint(self._mn)
 
     def _outputs(self, rho: np.ndarray) -> None:
@@ -657,12 +825,111 @@ class CPGNetwork:
             mode = "state" if self.phase_reset_as_state[n] else "pulse"
             self.phase_reset_events.append(PhaseResetEvent(self.time, int(n), mode, copies.copy()))
 
+    def _first_tick(self, phi: np.ndarray, rho: np.ndarray) -> None:
+        """A trial's first tick: ``start_from_pose`` (the named joints' command starts at the measured pose),
+        ``start_slope`` (the named joints' command starts at their calibrated pose shifted by the slope), and the
+        motor neurons' drive at rest on this frame, which the group gain multipliers scale the drive about."""
+        every = np.ones(self.batch, dtype=bool)
+        if self._start_from_pose:
+            self._hold_at_switch.extend((every, j, phi[:, source].copy()) for j, source in self._start_from_pose)
+        if self._start_slope is not None:  # circuit start_slope: the calibrated start pose shifted by the slope
+            slope = self._start_slope
+            self._hold_at_switch.extend(
+                (every, j, np.full(self.batch, pose0 + k * slope)) for j, pose0, k in self._start_slope_joints
+            )
+        if self.gain_groups and self.circuit.command == "position":
+            self._rest_drive = self._drive_at_rest(rho)
+            self.theta0 += (self._circuit_gain - self._gain) * self._rest_drive  # multipliers set before the trial
+
+    def _drive_at_rest(self, rho: np.ndarray) -> np.ndarray:
+        """MN_E - MN_F per joint, (batch, joints), with every RG at rest (V = 0) and the sensory neurons ``rho``: what
+        the reflexes alone make the motor neurons say, as (4.9)-(4.12) in ``_outputs`` with the RG term 0."""
+        n = self.n_neurons
+        drive = rho @ self._w_sensory
+        pf = _logistic(self._pf_half_slope, drive[:, :n] / self._pf_divisor - self._pf_centre)  # (4.10), (4.9)
+        mn = _logistic(self._mn_half_slope, (self._w_pf2mn * pf + drive[:, n:]) / self._mn_divisor - self.mn_theta)
+        return mn[:, E::2] - mn[:, F::2]
+
+    def _posture(self, phi: np.ndarray, control_dt: float) -> None:
+        """The torso held near its target (L1764, §7.18; circuit ``posture``): each of the posture's joints' theta_0
+        moves by gain sign (input - target) dt this tick, its accumulated shift kept within +-limit."""
+        posture, old = self.circuit.posture, self._posture_shift
+        lean = phi[:, self._posture_input] - posture.target  # rad, + = past the target in the input's + direction
+        shift = old + np.multiply.outer(lean * (self.posture_gain * control_dt), self._posture_signs)
+        np.minimum(np.maximum(shift, -posture.limit, out=shift), posture.limit, out=shift)  # np.clip, cheaper
+        self.theta0[:, self._posture_joints] += shift - old
+        self._posture_shift = shift
+
+    def _terrain_switch(self, phi: np.ndarray) -> None:
+        """The armed terrain switch (§5.8): fire in the copies whose input reached the threshold (from ``after`` on,
+        once), then move their parameters toward the new values (at once, or linearly over ``seconds``)."""
+        ts = self._terrain
+        if self.time >= ts.after - 1e-9:
+            value = phi[:, ts.input]
+            due = (value >= ts.threshold if ts.above else value <= ts.threshold) & ~ts.fired
+            if due.any():
+                self._start_terrain_switch(ts, due, value)
+        moving = ts.fired & ~ts.done
+        if not moving.any():
+            return
+        rows = np.flatnonzero(moving)
+        if ts.mode == "gradual":
+            fraction = np.clip((self.time - ts.start[rows]) / ts.seconds + 1e-9, 0.0, 1.0)
+        else:
+            fraction = np.ones(len(rows))
+        for group, new in ts.gains.items():
+            old = ts.old_gains[group][rows]
+            self._set_gains(group, old + fraction * (new - old), rows)
+        if ts.sigma_s is not None:
+            old = ts.old_sigma[rows]
+            value = old + fraction[:, None] * (ts.sigma_s - old)
+            cells = np.ix_(rows, ts.sigma_columns)
+            self.sigma_s[cells] = value
+            self.sigma_in[cells] = value
+            self.sigma_out[cells] = value
+            self._update_coefficients()
+        ts.done[rows] = fraction >= 1.0
+        if ts.done.all():
+            self._terrain = None  # every copy has switched and arrived: nothing more per tick
+
+    def _start_terrain_switch(self, ts: _TerrainSwitch, due: np.ndarray, value: np.ndarray) -> None:
+        """The copies ``due`` switch now: keep their current values (the old ones) and record the event."""
+        ts.fired |= due
+        ts.start[due] = self.time
+        for group in ts.gains:
+            ts.old_gains[group][due] = self.gain_multipliers[group][due]
+        ts.old_sigma[due] = self.sigma_s[np.ix_(np.flatnonzero(due), ts.sigma_columns)]
+
+        def per_copy(values: np.ndarray) -> float | np.ndarray:  # one number, or one per switched copy
+            values = np.asarray(values, dtype=float)
+            return float(values.flat[0]) if np.all(values == values.flat[0]) else values.copy()
+
+        old = {f"gain_{group}": per_copy(ts.old_gains[group][due]) for group in ts.gains}
+        new = {f"gain_{group}": float(v) for group, v in ts.gains.items()}
+        if ts.sigma_s is not None:
+            old["sigma_s"] = per_copy(ts.old_sigma[due])
+            new["sigma_s"] = float(ts.sigma_s)
+        self.terrain_switch_events.append(
+            TerrainSwitchEvent(
+                time=self.time,
+                input=ts.input_name,
+                value=per_copy(value[due]),
+                threshold=ts.threshold,
+                when=ts.when,
+                mode=ts.mode,
+                seconds=ts.seconds,
+                old=old,
+                new=new,
+                copies=due.copy(),
+            )
+        )
+
     def _hold_commands(self) -> None:
         """A continuous switch's last part: theta_0 := angle - G (MN_E - MN_F) with this tick's MN, so that the command
         equals the angle measured at the switch."""
         mn = self._mn
         for mask, j, angle in self._hold_at_switch:
-            drive = self.gain[j] * (mn[mask, 2 * j + E] - mn[mask, 2 * j + F])
+            drive = self._gain[mask, j] * (mn[mask, 2 * j + E] - mn[mask, 2 * j + F])
             self.theta0[mask, j] = angle - drive
         self._hold_at_switch.clear()
 
@@ -718,7 +985,7 @@ class CPGNetwork:
             if self._previous_phi is None:
                 rate = np.zeros(self.batch)
             else:
-                rate = np.sign(self.gain[j]) * (phi[:, source] - self._previous_phi[:, source]) / control_dt
+                rate = np.sign(self._gain[:, j]) * (phi[:, source] - self._previous_phi[:, source]) / control_dt
             out[name] = np.where(rate > 0, -abs(kick), np.where(rate < 0, abs(kick), kick))
             rates[name] = rate
         return out, rates
@@ -800,7 +1067,7 @@ class CPGNetwork:
         ch. 3) and M = the joint's gain, in V; position: theta_0 + G (MN_E - MN_F) in rad (author's code, digest
         §5 and §7.8)."""
         mn = self._mn
-        drive = self.gain * (mn[:, E::2] - mn[:, F::2])
+        drive = self._gain * (mn[:, E::2] - mn[:, F::2])
         out = drive if self.circuit.command == "voltage" else self.theta0 + drive
         return out if self.batched else out[0]
 
