@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 import pytest
+import yaml
 
 from sfl_brain.bodies.humanoid import Humanoid
 from sfl_brain.body import InProcessLink
@@ -380,7 +381,7 @@ def test_a_logged_trial_shows_its_terrain_switch_as_an_event():
 # ------------------------------------------------------------------------------------------ checks
 
 
-def test_trial_values_are_checked_with_and_without_the_module_parameters():
+def test_trial_values_are_checked_with_and_without_the_module_parameters(tmp_path):
     check = CPGController.check_trial_param
     for name, value in [("gain_pitch", 1.5), ("next_gain_roll", 0.0), ("posture_gain", 0.1), ("terrain_switch", "off"),
                         ("terrain_switch", "gradual"), ("switch_when", "below"), ("switch_threshold", -0.02),
@@ -403,7 +404,11 @@ def test_trial_values_are_checked_with_and_without_the_module_parameters():
             check(name, value)
         assert str(err.value) == message
     planar = CPGParams()  # no gain groups, no posture, no torso_pitch input
-    bare = CPGParams(circuit="humanoid_nao")  # the file as shipped today (no chapter-5 keys)
+    data = read_circuit_data("humanoid_nao")
+    del data["gain_groups"], data["posture"]  # the humanoid circuit without chapter 5's keys
+    path = tmp_path / "bare.yaml"
+    path.write_text(yaml.safe_dump(data))
+    bare = CPGParams(circuit=str(path))
     for name, value, params, message in [
         ("gain_pitch", 1.2, planar, "gain_pitch: expected circuit planar_8link to have the gain group 'pitch' "
          "(circuit key gain_groups); it has []"),
