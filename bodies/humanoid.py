@@ -20,9 +20,10 @@ NAO's places (§6: toe/heel x = +0.070/-0.030 m, inner/outer y = 0.023/0.030 m),
 the sole shared among them bilinearly, so the four add up to the foot's normal force; ``heel_*`` and
 ``toe_*`` are the sums of the heel and toe pairs, the inputs of GB and GF (L1345); the torso's pitch
 and roll from an IMU model (NAO's inertial board reports the fused attitude: here the exact one,
-noise-free) and its body-frame rates. ``torso_pitch`` is the torso's angle to the vertical in its
-sagittal plane, + = leaning forward, the input of FB/FF (L1347); ``torso_roll`` + = leaning right
-(about +x). Every value saturates at its declared bounds.
+noise-free) and its body-frame rates, and ``back``: the forward force pressing the robot over the last tick (N; a
+touch sensor, chosen here: a push or the ball; a controller's perfect push detector, E4.7). ``torso_pitch`` is the
+torso's angle to the vertical in its sagittal plane, + = leaning forward, the input of FB/FF (L1347); ``torso_roll`` +
+= leaning right (about +x). Every value saturates at its declared bounds.
 
 **Energy and efficiency** (5.4)-(5.8): P = sum_i c_i tau_i^2 with c_i = omega_0 / (tau_stall N_i^2)
 (§6, eta_g = 1), E_e = integral of P dt from the start to the finish line, E_k = m v_a^2 / 2 with
@@ -109,6 +110,7 @@ MAX_PUSH = 200.0  # N: the hardest push a trial may ask for (chosen here: ~4 bod
 MAX_JOINT_SPEED = 25.0  # rad/s: velocity sensor range (chosen here: 3 x the fastest no-load joint speed, 8.3)
 MAX_FSR = 100.0  # N per pressure sensor (chosen here: 2 body weights; reached only in impacts)
 MAX_GYRO = 20.0  # rad/s: gyro range (chosen here)
+MAX_BACK = 1000.0  # N: the touch sensor `back` saturates here
 GROUND_THICKNESS = 0.2  # m
 CLEARANCE = 0.0005  # m between the soles and the ground at the start
 HOLD_TORQUE = 0.05  # N m: what a servo resists with at zero error (chosen here: about NAO's joint friction)
@@ -141,6 +143,9 @@ SENSORS = (
     Signal("torso_roll", "rad", -math.pi, math.pi, "torso angle to the vertical, + = leaning right (about +x)"),
     Signal("torso_pitch_rate", "rad/s", -MAX_GYRO, MAX_GYRO, "gyro: torso rate about its own y axis"),
     Signal("torso_roll_rate", "rad/s", -MAX_GYRO, MAX_GYRO, "gyro: torso rate about its own x axis"),
+    Signal(
+        "back", "N", 0.0, 1000.0, "forward force pressing the robot over the last tick (a touch sensor: a push, a ball)"
+    ),
 )
 COMMANDS = tuple(
     Signal(f"q_{j.name}", "rad", j.lower, j.upper, f"{j.nao} position target, clipped to its limits") for j in JOINTS
@@ -338,6 +343,7 @@ class Humanoid(Body):
             for i, angle in zip(self.joint_index, start.tolist(), strict=True):
                 pb.resetJointState(self.robot, i, angle, 0.0, physicsClientId=self.client)
         self.ticks, self.t = 0, 0.0
+        self.back = 0.0  # N: the touch sensor `back` (see actuate)
         self.energy = 0.0  # E_e (5.6), J
         self.tau = np.zeros(N)
         self.fell = self.left_lane = self.finished = False
@@ -505,7 +511,7 @@ class Humanoid(Body):
         up = self.torso_turn[2]  # the world's vertical in the torso's frame
         imu = [math.atan2(-up[0], up[2]), math.atan2(up[1], up[2]), self.torso_spin[1], self.torso_spin[0]]
         feet = [fsr[2] + fsr[3], fsr[0] + fsr[1], fsr[6] + fsr[7], fsr[4] + fsr[5]]  # heel_l, toe_l, heel_r, toe_r
-        values = np.concatenate([self.q, self.dq, self.tau, feet, fsr, imu])
+        values = np.concatenate([self.q, self.dq, self.tau, feet, fsr, imu, (self.back,)])
         return np.minimum(np.maximum(values, SENSOR_LOW), SENSOR_HIGH)  # the sensors saturate
 
     # ------------------------------------------------------------------ acting
@@ -513,6 +519,7 @@ class Humanoid(Body):
         p, c, robot, joints = self.params, self.client, self.robot, self.joint_index
         target = np.minimum(np.maximum(command, LOWER), UPPER)
         h = p.control_dt / p.substeps
+        back = 0.0  # N s pressing the robot forward this tick (a push, the ball): the touch sensor `back`
         for k in range(p.substeps):
             error = target - self.q
             speed = np.minimum(np.maximum(p.servo_rate * error, -SPEED), SPEED)  # the servo's speed target
@@ -527,13 +534,15 @@ class Humanoid(Body):
             )
             if self.push_force > 0 and self.push_start <= self.t + k * h < self.push_end:
                 self._push(self.t + k * h)  # an external force lasts one step: applied every step of the push
+                back += max(float(self.push_vector[0]), 0.0) * h
             if self.ball_mass > 0 and self.t + k * h >= self.ball_time - 1e-9 and not self._ball_thrown:
                 self._throw()
             pb.stepSimulation(physicsClientId=c)
             if self._ball_thrown and self.t + k * h < self.ball_time + BALL_WATCH:
-                self._ball_contacts(self.t + (k + 1) * h, h)
+                back += self._ball_contacts(self.t + (k + 1) * h, h)
             self._read_joints()
             self.energy += float(MOTOR @ self.tau**2) * h  # (5.5)-(5.6)
+        self.back = min(back / p.control_dt, MAX_BACK)
         self.ticks += 1
         self.t = self.ticks * p.control_dt
         self._read_torso()
@@ -566,16 +575,18 @@ class Humanoid(Body):
         pb.resetBaseVelocity(self.ball, (self.ball_speed, 0.0, G * flight / 2), (0, 0, 0), physicsClientId=c)
         self._ball_thrown = True
 
-    def _ball_contacts(self, t: float, h: float) -> None:
-        """The ball's contact forces on the robot over this physics step: forward impulse and peak, arrows."""
+    def _ball_contacts(self, t: float, h: float) -> float:
+        """The ball's contact forces on the robot over this physics step: forward impulse and peak, arrows; returns
+        the forward impulse of this step (N s; 0 when it presses backward)."""
         contacts = pb.getContactPoints(bodyA=self.ball, bodyB=self.robot, physicsClientId=self.client)
         if not contacts:
-            return
+            return 0.0
         force = sum(np.array(ct[7]) * -ct[9] for ct in contacts)  # on the robot (the normal on B points to A)
         self.ball_impulse += float(force[0]) * h  # forward: a ball that comes to rest on a foot adds its weight only
         self.ball_peak = max(self.ball_peak, float(force[0]))
         if self._pushes is not None:
             self._pushes.append((t, np.array(contacts[0][6]), force))
+        return max(float(force[0]), 0.0) * h
 
     def _judge(self) -> None:
         """Fall, lane, finish line (once per control tick)."""

@@ -191,7 +191,7 @@ modules:
     )
 
 
-def test_e4_7_runs_its_conditions_and_the_report_marks_each_switch_at_its_push(tmp_path):
+def test_e4_7_runs_its_conditions_and_the_report_marks_each_switch_when_the_push_comes(tmp_path):
     out = tmp_path / "run"
     sets = (
         "protocol.grid.body.push_time=[9.2]",
@@ -209,7 +209,7 @@ def test_e4_7_runs_its_conditions_and_the_report_marks_each_switch_at_its_push(t
     assert report.returncode == 0, report.stderr
     page = (tmp_path / "report" / "e4_7_push.md").read_text()
     switches = [line for line in page.splitlines() if "pattern switch" in line]
-    # the switch follows the push (switch_at = push_time), in the two switching conditions only
-    assert [line.split(" | ")[1:3] for line in switches] == [["switch", "9.20"], ["switch_angle", "9.20"]]
+    # the touch sensor on the back fires the switch the tick after the push starts, in the switching conditions only
+    assert [line.split(" | ")[1:3] for line in switches] == [["switch", "9.21"], ["switch_angle", "9.21"]]
     assert "couplings silenced between hip_pitch_l-hip_pitch_r" in switches[0]
     assert (tmp_path / "report" / "e4_7_push_trace.png").stat().st_size > 20_000

@@ -247,3 +247,31 @@ def test_a_logged_trial_shows_links_joints_contacts_and_the_push():
     assert isinstance(sink.at("side/contact_l")[0], Arrows2D)
     assert any(isinstance(e, Event) and "push 30 N" in e.text for e in sink.at("events"))
     body.close()
+
+
+class FeelTheBack(Hold):
+    """Holds the standing pose and records the touch sensor `back` every tick."""
+
+    READS = ("back",)
+
+    def configure(self, params: dict, seed: int) -> None:
+        super().configure(params, seed)
+        self.felt: list[float] = []
+
+    def step(self, sensors: np.ndarray) -> np.ndarray:
+        self.felt.append(float(sensors[0]))
+        return self.pose
+
+
+def test_the_back_sensor_feels_a_push_and_a_ball_the_tick_after():
+    controller = FeelTheBack()
+    body = body_with(controller, duration=1.5)
+    run(body, {"push_force": 10.0, "push_time": 1.0, "push_duration": 0.1})
+    felt = np.array(controller.felt)
+    assert list(np.flatnonzero(felt > 0)) == list(range(101, 111)) and np.allclose(felt[101:111], 10.0)
+    run(body, {"ball_mass": 1.0, "ball_speed": 3.4, "ball_time": 1.0})
+    felt = np.array(controller.felt)
+    hit = np.flatnonzero(felt > 0)
+    assert len(hit) and 1.0 < hit[0] * 0.01 < 1.1  # the ball arrives about 0.15 m / 3.4 m/s after its throw
+    assert felt.sum() * 0.01 == pytest.approx(body.ball_impulse, rel=1e-9)  # what it felt is what the ball delivered
+    body.close()
