@@ -166,6 +166,7 @@ def write_report(run_dirs: list[Path], out: Path) -> Path:
     cpg_results: list[dict] = []
     conditions: dict[str, tuple[dict, list[Path], list[str]]] = {}  # scenario name -> (scenario, completed, left out)
     sweep_lines: list[str] = []
+    sweep_names: set[str] = set()  # grid sweeps shown by report_sweep
     summaries: dict[str, dict] = {}
     lines = [
         "| run | status | protocol | s_vig | trials | success rate | thesis | figure |",
@@ -192,6 +193,7 @@ def write_report(run_dirs: list[Path], out: Path) -> Path:
             figure = ""
         elif is_grid_sweep(scenario) and scenario["modules"].get("controller", {}).get("impl") == "cpg":
             sweep_lines += sweep_section(run_dir, out, scenario, rows)
+            sweep_names.add(scenario["name"])
             figure = ""
         elif is_cpg_run(scenario):
             cpg_results.append(cpg_run(run_dir, out, scenario, status))
@@ -234,6 +236,8 @@ def write_report(run_dirs: list[Path], out: Path) -> Path:
     stem = names[0] if len(cpg_results) == len(run_dirs) and len(names) == 1 else None
     if len(conditions) == 1 and sum(len(c[1]) + len(c[2]) for c in conditions.values()) == len(run_dirs):
         stem = next(iter(conditions))
+    if len(sweep_names) == 1 and len(run_dirs) == 1 and not conditions and not cpg_results:
+        stem = next(iter(sweep_names))  # one grid sweep: its page is named after it (e4_2_grid.md)
     head = f"# Results of {stem} (`sfl report`)\n\n" if stem else "# Results\n\n"
     if unfinished:
         head += (

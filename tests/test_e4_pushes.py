@@ -1,8 +1,10 @@
 """E4.3 (L1268-1282) and E4.4 (L1284-1324) on the 8-link walker: the push reaches the body, phase resetting acts on
 heel contact, pattern switching sets the hip and knee patterns of Fig. 4.17 (L1311, L1317), and the survival
-difference of docs/results/chapter4/e4_3_e4_4_pushes.md that holds on every seed and phase there.
+difference of docs/results/chapter4/e4_4_pushes.md that holds on every start and phase there (a 0.1-s push is
+survived without switching; the switched posture falls).
 
-Controller and body run in one process, with the settings of docs/experiments/e4_3_e4_4_pushes.py.
+Controller and body run in one process here, with the settings of scenarios/e4_3_pushes.yaml and e4_4_pushes.yaml (the
+experiments themselves run over processes: docs/experiments/chapter4.sh).
 """
 
 from __future__ import annotations

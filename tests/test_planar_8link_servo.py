@@ -2,7 +2,7 @@
 walking at the default pattern, part of the pattern space walking and part falling, pushes at a gait phase.
 
 Real pymunk physics; the CPG controller and the walker in one process (``InProcessLink``), as
-docs/experiments/planar_servo_grid.py runs them.
+docs/calibration/planar_servo_grid.py runs them.
 """
 
 from __future__ import annotations

@@ -1,22 +1,30 @@
 #!/usr/bin/env bash
-# Chapter 4 of the thesis on the planar walker, end to end: E4.1 (one joint's patterns), E4.2 (learning the
-# pattern of the 8-link walker, seeds 0, 1, 2, each run into runs/chapter4/), the report of E4.2 in
-# docs/results/chapter4/ (e4_2_learn.md and its figures), and E4.3-E4.4 (pushes) when its script is there.
-# About 15 minutes on 2 shared cores: E4.1 about a minute, each E4.2 run 1.5-3 minutes (one at a time), the
-# pushes about 3 minutes.
+# Chapter 4 of the thesis on the 8-link planar walker, end to end, every body experiment a scenario that `sfl run` runs
+# over processes (records, a Rerun recording, a status) into runs/chapter4/, and `sfl report` writing its page and
+# figures into docs/results/chapter4/:
+#   E4.1  one joint's patterns, domination, deletion (the network alone: docs/experiments/e4_1_patterns.py)
+#   E4.2  the grid of patterns that walk (scenarios/e4_2_grid.yaml), learning (sigma_s, sigma_f) over seeds 0, 1, 2
+#         (scenarios/e4_2_learn.yaml)
+#   E4.3  a push for a step, without phase resetting, with the state reset and with the pulse (e4_3_pushes.yaml)
+#   E4.4  a 45 N push, without and with pattern switching, voltage motors and position servos (e4_4_pushes*.yaml)
+# A run folder that already holds a completed run is kept (re-running resumes). About 25 minutes on 2 cores.
 #   bash docs/experiments/chapter4.sh
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 OUT=${OUT:-runs/chapter4}
-mkdir -p "$OUT"
+RESULTS=${RESULTS:-docs/results/chapter4}
+mkdir -p "$OUT" "$RESULTS"
 
 source docs/experiments/_once.sh  # once DIR COMMAND...: a completed run folder is kept
 
-python docs/experiments/e4_1_patterns.py --out docs/results/chapter4 > /dev/null
+python docs/experiments/e4_1_patterns.py --out "$RESULTS" > /dev/null
+once "$OUT/e4_2_grid" sfl run scenarios/e4_2_grid.yaml
+sfl report "$OUT/e4_2_grid" --out "$RESULTS"
 for seed in 0 1 2; do
   once "$OUT/e4_2_s$seed" sfl run scenarios/e4_2_learn.yaml --set seed=$seed
 done
-sfl report "$OUT"/e4_2_s0 "$OUT"/e4_2_s1 "$OUT"/e4_2_s2 --out docs/results/chapter4
-if [ -f docs/experiments/e4_3_e4_4_pushes.py ]; then
-  python docs/experiments/e4_3_e4_4_pushes.py --out docs/results/chapter4/e4_3_e4_4_pushes.md > /dev/null
-fi
+sfl report "$OUT"/e4_2_s0 "$OUT"/e4_2_s1 "$OUT"/e4_2_s2 --out "$RESULTS"
+for name in e4_3_pushes e4_4_pushes e4_4_pushes_servo; do
+  once "$OUT/$name" sfl run "scenarios/$name.yaml"
+  sfl report "$OUT/$name" --out "$RESULTS"
+done

@@ -1,25 +1,23 @@
 #!/usr/bin/env bash
-# Chapter 4 of the thesis on the humanoid (E4.5-E4.7, docs/results/chapter4/humanoid.md), end to end: the default
-# gait over 10 seeds, E4.5 (six 250-s walks, the Poincare map of torso pitch, the cobweb figure), E4.6 (11 deg
-# uphill around the thesis's alpha_MLR, theta_MLR) and E4.7 (a 34 N push at 7 timings, weaker pushes, both as balls). Each
-# script's tables go to $OUT/<name>.md (default runs/chapter4/humanoid); the cobweb figure to docs/results/chapter4/.
-# About 6 minutes on 2 quiet cores (5 min 25 s at 19:55 UTC, 2026-11-23).
+# Chapter 4 of the thesis on the humanoid, end to end, every experiment a scenario that `sfl run` runs over processes
+# (records, a Rerun recording, a status) into runs/chapter4/humanoid/, and `sfl report` writing its page and figures
+# into docs/results/chapter4/:
+#   the default gait over 10 starts (scenarios/humanoid_gait.yaml)
+#   E4.5  250-s walks and the Poincare return map of the torso pitch (e4_5_poincare.yaml)
+#   E4.6  walking onto an 11-degree slope around the thesis's alpha_MLR, theta_MLR, sigma_s swept (e4_6_uphill.yaml)
+#   E4.7  pushes of 0-34 N at 10 phases of the gait with and without L1437's switch (e4_7_push.yaml), and a real ball
+#         (e4_7_ball.yaml)
+# A run folder that already holds a completed run is kept (re-running resumes). About 45 minutes on 2 cores.
 #   bash docs/experiments/chapter4_humanoid.sh
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 OUT=${OUT:-runs/chapter4/humanoid}
-mkdir -p "$OUT"
-run() {
-  local name=$1; shift
-  echo "$name: python $*"
-  python "$@" > "$OUT/$name.md"
-}
-run gait docs/experiments/humanoid_gait.py --walk 10
-run e4_5_poincare docs/experiments/e4_5_poincare.py --seeds 0 1 2 --noise 0.02 0.08 \
-  --figure docs/results/chapter4/e4_5_cobweb.png
-run e4_6_uphill docs/experiments/e4_6_uphill.py
-run e4_7_push_34n docs/experiments/e4_7_push.py
-run e4_7_push_weaker docs/experiments/e4_7_push.py --forces 5 10 20 --times 9 9.33
-run e4_7_ball docs/experiments/e4_7_push.py --ball 1
-run e4_7_ball_weaker docs/experiments/e4_7_push.py --ball 1 --forces 5 10 20 --times 9 9.33
-echo "tables in $OUT/"
+RESULTS=${RESULTS:-docs/results/chapter4}
+mkdir -p "$OUT" "$RESULTS"
+
+source docs/experiments/_once.sh  # once DIR COMMAND...: a completed run folder is kept
+
+for name in humanoid_gait e4_5_poincare e4_6_uphill e4_7_push e4_7_ball; do
+  once "$OUT/$name" sfl run "scenarios/$name.yaml"
+  sfl report "$OUT/$name" --out "$RESULTS"
+done

@@ -1,6 +1,6 @@
 """The humanoid's default CPG gait: where the gains and offsets of ``humanoid_nao.yaml`` come from; does it walk.
 
-    python docs/experiments/humanoid_gait.py [--calibrate] [--walk 10] [--noise 0.02] [--alpha-mlr 1 ...]
+    python docs/calibration/humanoid_gait.py [--calibrate] [--walk 10] [--noise 0.02] [--alpha-mlr 1 ...]
                                              [--set KEY=VALUE ...]
 
 The circuit ``modules/cpg/circuits/humanoid_nao.yaml`` sets each joint's command theta_0 + G (MN_E - MN_F) (digest

@@ -1,6 +1,6 @@
 """E4.2 groundwork: which (sigma_s, sigma_f) of the thesis's range walk the 8-link walker, one trial per cell.
 
-    python docs/experiments/e4_2_grid.py [--n 9] [--initial-knee -0.3] [--set KEY=VALUE ...]
+    python docs/calibration/e4_2_grid.py [--n 9] [--initial-knee -0.3] [--set KEY=VALUE ...]
                                          [--out docs/results/chapter4/e4_2_grid.md]
 
 E4.2 (L1237-1260) learns the RG pattern (sigma_s, sigma_f) in [0, 5]^2 (Tables 4.1-4.3). One pattern is given to
@@ -114,7 +114,7 @@ def markdown(values: np.ndarray, cells: dict, note: str) -> str:
 
 PREFACE = """# E4.2 groundwork: which patterns walk the 8-link walker
 
-- **Command:** `python docs/experiments/e4_2_grid.py --out docs/results/chapter4/e4_2_grid.md`
+- **Command:** `python docs/calibration/e4_2_grid.py --out docs/results/chapter4/e4_2_grid.md`
   (about 15 s on 2 shared cores).
 - **Run:** {date}, git HEAD `{head}`.
 

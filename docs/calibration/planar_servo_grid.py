@@ -1,15 +1,15 @@
 """The position-servo 8-link walker (``planar_8link_servo``) under its position circuit: calibration and probes.
 
-    python docs/experiments/planar_servo_grid.py seeds [--seeds 8] [--set KEY=VALUE ...]
-    python docs/experiments/planar_servo_grid.py grid [--n 9] [--seed 0] [--no-reset] [--set KEY=VALUE ...]
-    python docs/experiments/planar_servo_grid.py search [--configs 500] [--rng 21]
-    python docs/experiments/planar_servo_grid.py spread [--seeds 8] [--start-noise 0.02]
+    python docs/calibration/planar_servo_grid.py seeds [--seeds 8] [--set KEY=VALUE ...]
+    python docs/calibration/planar_servo_grid.py grid [--n 9] [--seed 0] [--no-reset] [--set KEY=VALUE ...]
+    python docs/calibration/planar_servo_grid.py search [--configs 500] [--rng 21]
+    python docs/calibration/planar_servo_grid.py spread [--seeds 8] [--start-noise 0.02]
 
 The thesis drives each joint of its 8-link walker "by a simulated servo motor" (L1201). ``bodies/planar_8link.py``
 has two: the voltage walker ``planar_8link`` (the command is the motor voltage, (3.6)) and the servo walker
 ``planar_8link_servo`` (the command is a target angle, tracked by V = K_p (q_cmd - q) - K_d omega into the same DC
 motor). The servo walker's circuit is ``modules/cpg/circuits/planar_8link_servo.yaml``; this script is the probe its
-comments quote. Controller and body run in one process (``InProcessLink``), as ``docs/experiments/e4_2_grid.py``.
+comments quote. Controller and body run in one process (``InProcessLink``), as ``docs/calibration/e4_2_grid.py``.
 
 - ``seeds``: the default pattern (sigma_s, sigma_f) = (2, 2) on the legs, from the 0.3-rad crouch, ``start_noise``
   0.02, seeds 0..n-1, phase resets on and off. A cell reads ``W<steps>`` (no fall and >= 2 steps in 10 s: E4.2's
