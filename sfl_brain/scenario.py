@@ -172,6 +172,12 @@ class ConditionsProtocol(Strict):
         description="body metrics (or `quality`) sfl report summarises per condition (mean and spread)",
     )
     analyses: list[Analysis] = Field([], max_length=8, description="what sfl report draws from the recording")
+    best_of: dict[str, str] = Field(
+        {},
+        max_length=16,
+        description="name -> a learn run's folder: a condition's value @NAME.AXIS is that run's best parameter on AXIS "
+        "(the success neuron nearest its highest-reward trial, L1584)",
+    )
     follow: dict[str, str] = Field(
         {},
         max_length=16,
@@ -974,7 +980,80 @@ def load(path: str | Path, overrides: list[str] = (), seed: int | None = None) -
         raise ScenarioError(str(path), [Problem("", f"too large to check ({type(exc).__name__})")]) from None
 
 
+def learnt_values(raw: dict, base_dir: Path) -> tuple[dict, list[Problem]]:
+    """A conditions protocol's references to learnt parameters, replaced by their values: a condition's value
+    ``"@NAME.AXIS"`` is the physical value on axis AXIS of the best parameters (summary.json ``best.neuron_point``: the
+    success neuron nearest the highest-reward trial, L1584) of the learn run ``protocol.best_of.NAME`` (a run folder,
+    from the current folder or the scenario's). Returns the scenario with the values in place (what the run folder's
+    scenario.yaml keeps) and the problems."""
+    protocol = raw.get("protocol") if isinstance(raw, dict) else None
+    if not isinstance(protocol, dict) or protocol.get("kind") != "conditions":
+        return raw, []
+    conditions = protocol.get("conditions")
+    runs = protocol.get("best_of") or {}
+    if not isinstance(conditions, dict) or not isinstance(runs, dict):
+        return raw, []
+    out, problems, found = copy.deepcopy(raw), [], {}
+    for name, values in conditions.items():
+        if not isinstance(values, dict):
+            continue
+        for key, value in values.items():
+            if not (isinstance(value, str) and value.startswith("@")):
+                continue
+            where = f"protocol.conditions.{name}.{key}"
+            run, _, axis = value[1:].partition(".")
+            if run not in runs:
+                problems.append(
+                    Problem(
+                        where,
+                        f"expected @RUN.AXIS with RUN in protocol.best_of {sorted(runs)}; got {value!r}",
+                        nearest(run, sorted(runs)),
+                    )
+                )
+                continue
+            if run not in found:
+                found[run] = _best_of(runs[run], base_dir)
+            best = found[run]
+            if isinstance(best, str):
+                problems.append(Problem(f"protocol.best_of.{run}", best))
+                runs = {k: v for k, v in runs.items() if k != run}  # said once
+                continue
+            if axis not in best:
+                problems.append(
+                    Problem(
+                        where,
+                        f"expected an axis of {run}'s learn run {sorted(best)}; got {axis!r}",
+                        nearest(axis, sorted(best)),
+                    )
+                )
+                continue
+            out["protocol"]["conditions"][name][key] = best[axis]
+    return out, problems
+
+
+def _best_of(folder: str, base_dir: Path) -> dict | str:
+    """The physical best parameters (axis -> value) of the learn run in ``folder``, or why there are none."""
+    path = Path(str(folder))
+    try:
+        if not path.is_absolute() and not path.is_dir():
+            path = base_dir / path
+        summary = json.loads((path / "summary.json").read_text())
+    except (OSError, ValueError):
+        return f"expected a completed learn run's folder (with summary.json); {path} has none"
+    if not isinstance(summary, dict) or summary.get("status") != "completed":
+        return (
+            f"expected a completed learn run; {path} is {summary.get('status') if isinstance(summary, dict) else '?'}"
+        )
+    best = summary.get("best")
+    if not isinstance(best, dict) or not isinstance(best.get("neuron_point"), dict):
+        return f"expected best parameters in {path / 'summary.json'} (a learn run with a success); it has none"
+    return {k: v for k, v in best["neuron_point"].items() if k != "v_unit" and isinstance(v, int | float)}
+
+
 def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
+    raw, problems = learnt_values(raw, base_dir)
+    if problems:
+        raise ScenarioError(file, problems)
     try:
         scenario = ScenarioModel.model_validate(raw)
     except ValidationError as exc:

@@ -213,3 +213,37 @@ def test_e4_7_runs_its_conditions_and_the_report_marks_each_switch_when_the_push
     assert [line.split(" | ")[1:3] for line in switches] == [["switch", "9.21"], ["switch_angle", "9.21"]]
     assert "couplings silenced between hip_pitch_l-hip_pitch_r" in switches[0]
     assert (tmp_path / "report" / "e4_7_push_trace.png").stat().st_size > 20_000
+
+
+def test_a_condition_takes_a_learn_runs_best_parameters_and_says_why_it_cannot(tmp_path, write_scenario):
+    run = tmp_path / "flat"
+    run.mkdir()
+    best = {"neuron": 3, "neuron_point": {"v_unit": [0.5, 0.25], "x": 0.5, "y": 0.25}}
+    (run / "summary.json").write_text(json.dumps({"status": "completed", "best": best}))
+    text = f"""
+name: learnt
+protocol:
+  kind: conditions
+  best_of: {{flat: {run}}}
+  conditions:
+    best: {{body.x: "@flat.x", body.y: "@flat.y"}}
+    other: {{body.x: 0.1}}
+modules:
+  body: {{impl: analytic}}
+"""
+    plan = sc.load(write_scenario(text))
+    assert plan.scenario.protocol.conditions["best"] == {"body.x": 0.5, "body.y": 0.25}
+    assert plan.raw["protocol"]["conditions"]["best"] == {"body.x": 0.5, "body.y": 0.25}  # what the run folder keeps
+    for change, message in [
+        (('"@flat.y"', '"@flta.y"'), "protocol.conditions.best.body.y: expected @RUN.AXIS with RUN in "
+         "protocol.best_of ['flat']; got '@flta.y' (did you mean `flat`?)"),
+        (('"@flat.y"', '"@flat.z"'), "protocol.conditions.best.body.y: expected an axis of flat's learn run "
+         "['x', 'y']; got 'z'"),
+        ((str(run), str(tmp_path / "none")), "protocol.best_of.flat: expected a completed learn run's folder (with "
+         "summary.json)"),
+    ]:  # fmt: skip
+        done = sfl("check", str(write_scenario(text.replace(*change))))
+        assert done.returncode == 2 and message in done.stderr, done.stderr
+    (run / "summary.json").write_text(json.dumps({"status": "completed", "best": None}))
+    done = sfl("check", str(write_scenario(text)))
+    assert done.returncode == 2 and "expected best parameters in" in done.stderr

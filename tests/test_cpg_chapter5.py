@@ -432,7 +432,13 @@ def test_a_terrain_switch_needs_its_threshold_direction_and_new_parameters():
     controller = humanoid_controller()
     for params, message in [
         ({"terrain_switch": "at_once", "next_sigma_s": 4.0},
-         "terrain_switch 'at_once': expected the trial parameters ['switch_threshold', 'switch_when'] too; got none"),
+         "terrain_switch 'at_once': expected one of switch_threshold (rad) or switch_band (the threshold measured on "
+         "the walk: mean +- switch_band x half range, digest §7.17)"),
+        ({"terrain_switch": "at_once", "next_sigma_s": 4.0, "switch_threshold": 0.1, "switch_band": 1.5},
+         "terrain_switch 'at_once': expected one of switch_threshold (rad) or switch_band (the threshold measured on "
+         "the walk: mean +- switch_band x half range, digest §7.17)"),
+        ({"terrain_switch": "at_once", "next_sigma_s": 4.0, "switch_band": 1.5},
+         "terrain_switch 'at_once': expected the trial parameter switch_when too; got none"),
         ({"terrain_switch": "gradual", "switch_threshold": 0.1, "switch_when": "above"},
          "terrain_switch 'gradual': expected at least one of next_gain_pitch, next_gain_roll, next_sigma_s (the new "
          "condition's parameters); got none"),
@@ -468,3 +474,19 @@ def test_nothing_is_done_per_tick_when_posture_and_switching_are_off():
         network.arm_terrain_switch("torso_pitch", 0.1, "up")
     with pytest.raises(ValueError, match="next_gain_yaw: expected a gain group of circuit humanoid_nao"):
         network.arm_terrain_switch("torso_pitch", 0.1, "above", gains={"yaw": 1.0})
+
+
+def test_switch_band_measures_the_threshold_on_the_walk_itself_by_the_stated_rule():
+    """switch_band 1.5: the torso pitch's mean - 1.5 x half range over switch_measure (2 s) from terrain_switch_after
+    (3 s), the flat part of the walk (the ramp starts at x = 1 m, reached after 9 s), as threshold_from_the_flat does
+    by hand over its own window; detection starts at 5 s, and the switch fires where the pitch first reaches it."""
+    off, _ = ramp_walks()
+    params = {"terrain_switch": "at_once", "switch_band": 1.5, "switch_when": "below", **SWITCH_TO}
+    trial = walk(params, {"terrain": RAMP}, seconds=12.0)
+    [event] = trial.network.terrain_switch_events
+    window = (off.t >= 3.0 - 1e-9) & (off.t < 5.0 - 1e-9)
+    expected = off.pitch[window].mean() - 1.5 * np.ptp(off.pitch[window]) / 2
+    assert event.threshold == pytest.approx(expected, abs=1e-9)
+    later = off.t >= 5.0 - 1e-9
+    assert event.time == pytest.approx(off.t[later][np.argmax(off.pitch[later] <= event.threshold)])
+    assert trial.x[np.argmin(np.abs(trial.t - event.time))] > 0.8  # at the ramp, not on the flat

@@ -62,11 +62,12 @@ caption; separate maps for flat, 10 deg up and 10 deg down, §5.7; switching whi
   best neuron, physical values; one not given stays as it is). ``terrain_switch``: "off" (default), "at_once" (in one
   tick) or "gradual" (linearly over the module parameter ``switch_seconds``, one cycle of the flat gait, §7.17); it
   fires once, the first tick at or after the module parameter ``terrain_switch_after`` (s: the start-up transient
-  must not fire it) when the input ``terrain_input`` (the torso pitch, rad) is at or ``switch_when`` ("above",
-  "below") ``switch_threshold`` (rad; the experiment derives it from the flat gait's torso oscillation, §7.17: mean
-  +- 1.5 x half range). The thesis detects "when the torso reaches previously defined threshold" (L1759): a level,
-  not a rising edge. On logged trials the switch is a telemetry event ``events/terrain_switch``; the network keeps
-  it (``network.terrain_switch_events``).
+  must not fire it) when the input ``terrain_input`` (the torso pitch, rad) is at or ``switch_when`` ("above", "below")
+  ``switch_threshold`` (rad), or a threshold the walk itself measures: ``switch_band`` k, the input's mean +- k x its
+  half range over the module parameter ``switch_measure`` s from ``terrain_switch_after`` (§7.17's rule: mean +- 1.5 x
+  half range of the gait before the terrain changes; detection starts once it is known). The thesis detects "when the
+  torso reaches previously defined threshold" (L1759): a level, not a rising edge. On logged trials the switch is a
+  telemetry event ``events/terrain_switch``; the network keeps it (``network.terrain_switch_events``).
 
 On logged trials every neuron is shown on ``sim_time``: per joint and side (E, F) RG V and q, PF and MN, then the
 sensory neurons (``CPGNetwork.neuron_names``).
@@ -105,6 +106,7 @@ TRIAL_PARAMS = (
     "posture_gain",
     "terrain_switch",
     "switch_threshold",
+    "switch_band",
     "switch_when",
     "next_gain_pitch",
     "next_gain_roll",
@@ -234,6 +236,12 @@ class CPGParams(ModuleParams):
         3.0,
         ge=0,
         description="s of trial time before which no terrain switch fires (the start-up transient; not in the thesis)",
+    )
+    switch_measure: float = Field(
+        2.0,
+        gt=0,
+        description="s from terrain_switch_after over which a trial's switch_band measures the watched input's mean "
+        "and half range (three cycles of the shipped flat gait); detection starts after it",
     )
     switch_seconds: float = Field(
         0.667,
@@ -428,7 +436,7 @@ class CPGController(Controller):
             p = self.params
             network.arm_terrain_switch(
                 p.watched_input,
-                float(params["switch_threshold"]),
+                float(params["switch_threshold"]) if "switch_threshold" in params else None,
                 params["switch_when"],
                 mode=mode,
                 seconds=p.switch_seconds,
@@ -436,6 +444,7 @@ class CPGController(Controller):
                 gains={GAIN_PARAMS[k]: float(params[k]) for k in ("next_gain_pitch", "next_gain_roll") if k in params},
                 sigma_s=float(params["next_sigma_s"]) if "next_sigma_s" in params else None,
                 sigma_joints=self._pattern_joints,
+                band=(float(params["switch_band"]), p.switch_measure) if "switch_band" in params else None,
             )
 
     def step(self, sensors: np.ndarray) -> np.ndarray:
@@ -506,6 +515,8 @@ def _check_trial_value(
         return
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         raise ValueError(f"{name}: expected a finite number; got {value!r}")
+    if name == "switch_band" and value < 0:
+        raise ValueError(f"switch_band: expected k >= 0 (the threshold: mean +- k x half range); got {value!r}")
     if name in ("sigma_s", "sigma_f", "next_sigma_s") and value < 0:
         raise ValueError(f"{name}: expected a number >= 0 (Table 4.1: [0, 5]); got {value!r}")
     if name in GAIN_PARAMS:
@@ -529,9 +540,13 @@ def _check_terrain_switch(params: dict) -> None:
     mode = params.get("terrain_switch", "off")
     if mode == "off":
         return
-    missing = [k for k in ("switch_threshold", "switch_when") if k not in params]
-    if missing:
-        raise ValueError(f"terrain_switch {mode!r}: expected the trial parameters {missing} too; got none")
+    if ("switch_threshold" in params) == ("switch_band" in params):
+        raise ValueError(
+            f"terrain_switch {mode!r}: expected one of switch_threshold (rad) or switch_band (the threshold measured "
+            "on the walk: mean +- switch_band x half range, digest §7.17)"
+        )
+    if "switch_when" not in params:
+        raise ValueError(f"terrain_switch {mode!r}: expected the trial parameter switch_when too; got none")
     if not any(k in params for k in ("next_gain_pitch", "next_gain_roll", "next_sigma_s")):
         raise ValueError(
             f"terrain_switch {mode!r}: expected at least one of next_gain_pitch, next_gain_roll, next_sigma_s "
@@ -547,9 +562,8 @@ def terrain_switch_text(event) -> str:
 
     how = "at once" if event.mode == "at_once" else f"gradually over {event.seconds:g} s"
     moves = ", ".join(f"{name} {number(event.old[name])} -> {number(new)}" for name, new in event.new.items())
-    return (
-        f"terrain switch ({how}): {event.input} {number(event.value)} rad {event.when} {event.threshold:.4g}; {moves}"
-    )
+    where = f"{event.input} {number(event.value)} rad {event.when} {number(event.threshold)}"
+    return f"terrain switch ({how}): {where}; {moves}"
 
 
 def switch_text(event) -> str:

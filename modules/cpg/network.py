@@ -206,10 +206,21 @@ class TerrainSwitchEvent:
 class _TerrainSwitch:
     """An armed terrain switch (``CPGNetwork.arm_terrain_switch``) and its progress per batch copy."""
 
-    def __init__(self, network: CPGNetwork, input: str, threshold, when, after, mode, seconds, gains, sigma_s, joints):
+    def __init__(
+        self, network: CPGNetwork, input: str, threshold, when, after, mode, seconds, gains, sigma_s, joints, band=None
+    ):
         b = network.batch
         self.input_name, self.input = input, network.circuit.inputs.index(input)
-        self.threshold, self.above, self.when = float(threshold), when == "above", when
+        self.above, self.when = when == "above", when
+        # threshold: given (one number), or measured (band = (k, seconds)): the input's mean +- k x its half range
+        # over ``seconds`` from ``after`` (the gait before the terrain changes, digest §7.17), per copy; then detection
+        self.band = band
+        self.threshold = np.full(b, np.nan if band else float(threshold))
+        if band:
+            self.low, self.high = np.full(b, np.inf), np.full(b, -np.inf)
+            self.total, self.count = np.zeros(b), 0
+            self.measured_from, self.measured_to = float(after), float(after) + float(band[1])
+            after = self.measured_to
         self.after, self.mode = float(after), mode
         self.seconds = float(seconds) if mode == "gradual" else 0.0
         self.gains = dict(gains)  # group -> its new multiplier
@@ -512,7 +523,7 @@ class CPGNetwork:
     def arm_terrain_switch(
         self,
         input: str,
-        threshold: float,
+        threshold: float | None,
         when: str,
         mode: str = "at_once",
         seconds: float = 0.0,
@@ -520,12 +531,16 @@ class CPGNetwork:
         gains: dict[str, float] | None = None,
         sigma_s: float | None = None,
         sigma_joints: list[str] | None = None,
+        band: tuple[float, float] | None = None,
     ) -> None:
         """Switch parameters once this trial when the terrain changes (§5.8, L1759-1766): from ``after`` s on, the first
         tick whose ``input`` (e.g. the torso pitch, rad) is at or ``when`` ("above", "below") ``threshold`` starts
         moving the group gain multipliers ``gains`` (group -> new value) and the RG's sigma_s of ``sigma_joints``
         (default all; None: unchanged) from their values at that tick to the new ones: ``mode`` "at_once" in that
         tick, "gradual" linearly over ``seconds`` (the thesis's "switching occurs gradually", L1766). Per batch copy.
+        ``band`` = (k, seconds) instead of a ``threshold``: the threshold is measured on the walk itself, the input's
+        mean +- k x its half range (- below, + above) over ``seconds`` from ``after`` (digest §7.17's rule, "defined
+        with taking into account the oscillation range of the torso", L1759), and detection starts once it is known.
         ``reset`` disarms it; the switches are in ``terrain_switch_events``."""
         if input not in self.circuit.inputs:
             raise ValueError(
@@ -544,8 +559,12 @@ class CPGNetwork:
                     f"next_gain_{group}: expected a gain group of circuit {self.circuit.name} (gain_groups "
                     f"{list(self.gain_groups)}); it has no {group!r}"
                 )
+        if band is not None and not (band[0] >= 0 and band[1] > 0):
+            raise ValueError(f"switch_band: expected (k >= 0, seconds > 0); got {band!r}")
+        if band is None and threshold is None:
+            raise ValueError("terrain switch: expected a threshold, or a band to measure it by")
         self._terrain = _TerrainSwitch(
-            self, input, threshold, when, after, mode, seconds, gains or {}, sigma_s, sigma_joints
+            self, input, threshold, when, after, mode, seconds, gains or {}, sigma_s, sigma_joints, band
         )
 
     def set_descending(self, alpha_mlr=None, theta_mlr=None, joints: list[str] | None = None) -> None:
@@ -750,6 +769,7 @@ class CPGNetwork:
         if self._pending_switches:
             self._switches(phi, control_dt)
         if self._terrain is not None:
+            self._dt_last = control_dt
             self._terrain_switch(phi)
         self._constant = self._per_tick_constant()
         self._integrate(control_dt / substeps, substeps)
@@ -864,6 +884,17 @@ class CPGNetwork:
         """The armed terrain switch (§5.8): fire in the copies whose input reached the threshold (from ``after`` on,
         once), then move their parameters toward the new values (at once, or linearly over ``seconds``)."""
         ts = self._terrain
+        if ts.band and np.isnan(ts.threshold).any():  # still measuring the gait's band (§7.17)
+            if self.time >= ts.measured_from - 1e-9:
+                value = phi[:, ts.input]
+                np.minimum(ts.low, value, out=ts.low)
+                np.maximum(ts.high, value, out=ts.high)
+                ts.total += value
+                ts.count += 1
+            if self.time + 1e-9 >= ts.measured_to - self._dt_last:  # the window's last tick: the threshold is known
+                sign = 1.0 if ts.above else -1.0
+                ts.threshold = ts.total / max(ts.count, 1) + sign * ts.band[0] * (ts.high - ts.low) / 2
+            return
         if self.time >= ts.after - 1e-9:
             value = phi[:, ts.input]
             due = (value >= ts.threshold if ts.above else value <= ts.threshold) & ~ts.fired
@@ -914,7 +945,7 @@ class CPGNetwork:
                 time=self.time,
                 input=ts.input_name,
                 value=per_copy(value[due]),
-                threshold=ts.threshold,
+                threshold=per_copy(ts.threshold[due]),
                 when=ts.when,
                 mode=ts.mode,
                 seconds=ts.seconds,
