@@ -30,6 +30,7 @@ import numpy as np  # noqa: E402
 import yaml  # noqa: E402
 
 from .records import read_records, run_status, summarise  # noqa: E402
+from .report_ch5 import ch5_sections, is_ch5_run  # noqa: E402
 from .report_conditions import conditions_section, is_conditions_run  # noqa: E402
 from .report_cpg import cpg_run, is_cpg_run, write_cpg_sections  # noqa: E402
 from .report_sweep import is_grid_sweep, sweep_section  # noqa: E402
@@ -167,6 +168,8 @@ def write_report(run_dirs: list[Path], out: Path) -> Path:
     conditions: dict[str, tuple[dict, list[Path], list[str]]] = {}  # scenario name -> (scenario, completed, left out)
     sweep_lines: list[str] = []
     sweep_names: set[str] = set()  # grid sweeps shown by report_sweep
+    ch5_runs: list[Path] = []  # chapter 5's learn runs (report_ch5)
+    ch5_names: set[str] = set()
     summaries: dict[str, dict] = {}
     lines = [
         "| run | status | protocol | s_vig | trials | success rate | thesis | figure |",
@@ -184,7 +187,11 @@ def write_report(run_dirs: list[Path], out: Path) -> Path:
         learn = scenario["protocol"]["kind"] == "learn"
         rates = _thesis(scenario["name"]) if learn else {}
         thesis = f"{rates[s_vig]:.0%}" if isinstance(s_vig, int | float) and s_vig in rates else ""
-        if is_conditions_run(scenario):
+        if is_ch5_run(scenario):
+            ch5_runs.append(run_dir)
+            ch5_names.add(scenario["name"])
+            figure = ""
+        elif is_conditions_run(scenario):
             entry = conditions.setdefault(scenario["name"], (scenario, [], []))
             if completed:
                 entry[1].append(run_dir)
@@ -230,12 +237,15 @@ def write_report(run_dirs: list[Path], out: Path) -> Path:
     unfinished = [d for d, st in statuses.items() if st["status"] != "completed"]
     vigilance_lines += write_cpg_sections(cpg_results) if cpg_results else []
     vigilance_lines += [""] + sweep_lines if sweep_lines else []
+    vigilance_lines += [""] + ch5_sections(ch5_runs, out) if ch5_runs else []
     for scenario, completed_runs, skipped in conditions.values():
         vigilance_lines += [""] + conditions_section(scenario, completed_runs, skipped, out)
     names = sorted({r["scenario"] for r in cpg_results})
     stem = names[0] if len(cpg_results) == len(run_dirs) and len(names) == 1 else None
     if len(conditions) == 1 and sum(len(c[1]) + len(c[2]) for c in conditions.values()) == len(run_dirs):
         stem = next(iter(conditions))
+    if len(ch5_names) == 1 and len(ch5_runs) == len(run_dirs):
+        stem = next(iter(ch5_names))  # chapter 5's learn runs: one page (e5_learn.md)
     if len(sweep_names) == 1 and len(run_dirs) == 1 and not conditions and not cpg_results:
         stem = next(iter(sweep_names))  # one grid sweep: its page is named after it (e4_2_grid.md)
     head = f"# Results of {stem} (`sfl report`)\n\n" if stem else "# Results\n\n"
