@@ -392,7 +392,7 @@ def test_trial_values_are_checked_with_and_without_the_module_parameters(tmp_pat
         ("terrain_switch", "gradualy", "terrain_switch: expected one of ['off', 'at_once', 'gradual']; got 'gradualy' "
          "(did you mean 'gradual'?)"),
         ("terrain_switch", True, "terrain_switch: expected one of ['off', 'at_once', 'gradual']; got True"),
-        ("switch_when", "bellow", "switch_when: expected one of ['above', 'below']; got 'bellow' "
+        ("switch_when", "bellow", "switch_when: expected one of ['above', 'below', 'outside']; got 'bellow' "
          "(did you mean 'below'?)"),
         ("switch_threshold", float("nan"), "switch_threshold: expected a finite number; got nan"),
         ("gain_pitch", -0.5, "gain_pitch: expected a multiplier of the calibrated gains >= 0 (1: the gait); got -0.5"),
@@ -490,3 +490,18 @@ def test_switch_band_measures_the_threshold_on_the_walk_itself_by_the_stated_rul
     later = off.t >= 5.0 - 1e-9
     assert event.time == pytest.approx(off.t[later][np.argmax(off.pitch[later] <= event.threshold)])
     assert trial.x[np.argmin(np.abs(trial.t - event.time))] > 0.8  # at the ramp, not on the flat
+
+
+def test_switch_when_outside_fires_on_leaving_the_measured_band_either_way_and_needs_a_band():
+    off, _ = ramp_walks()
+    params = {"terrain_switch": "at_once", "switch_band": 1.5, "switch_when": "outside", **SWITCH_TO}
+    trial = walk(params, {"terrain": RAMP}, seconds=12.0)
+    [event] = trial.network.terrain_switch_events
+    window = (off.t >= 3.0 - 1e-9) & (off.t < 5.0 - 1e-9)
+    mean, half = off.pitch[window].mean(), 1.5 * np.ptp(off.pitch[window]) / 2
+    assert event.threshold == pytest.approx((mean - half, mean + half), abs=1e-9)
+    later = off.t >= 5.0 - 1e-9
+    outside = (off.pitch[later] <= mean - half) | (off.pitch[later] >= mean + half)
+    assert event.time == pytest.approx(off.t[later][np.argmax(outside)])
+    with pytest.raises(ValueError, match="switch_when 'outside': expected a band"):
+        walk({"terrain_switch": "at_once", "switch_threshold": 0.1, "switch_when": "outside", **SWITCH_TO}, {})

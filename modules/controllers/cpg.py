@@ -62,7 +62,8 @@ caption; separate maps for flat, 10 deg up and 10 deg down, §5.7; switching whi
   best neuron, physical values; one not given stays as it is). ``terrain_switch``: "off" (default), "at_once" (in one
   tick) or "gradual" (linearly over the module parameter ``switch_seconds``, one cycle of the flat gait, §7.17); it
   fires once, the first tick at or after the module parameter ``terrain_switch_after`` (s: the start-up transient
-  must not fire it) when the input ``terrain_input`` (the torso pitch, rad) is at or ``switch_when`` ("above", "below")
+  must not fire it) when the input ``terrain_input`` (the torso pitch, rad) is at or ``switch_when`` ("above", "below";
+  "outside": out of the measured band either way)
   ``switch_threshold`` (rad), or a threshold the walk itself measures: ``switch_band`` k, the input's mean +- k x its
   half range over the module parameter ``switch_measure`` s from ``terrain_switch_after`` (§7.17's rule: mean +- 1.5 x
   half range of the gait before the terrain changes; detection starts once it is known). The thesis detects "when the
@@ -562,7 +563,11 @@ def terrain_switch_text(event) -> str:
 
     how = "at once" if event.mode == "at_once" else f"gradually over {event.seconds:g} s"
     moves = ", ".join(f"{name} {number(event.old[name])} -> {number(new)}" for name, new in event.new.items())
-    where = f"{event.input} {number(event.value)} rad {event.when} {number(event.threshold)}"
+    if event.when == "outside":  # the band (low, high) it left
+        band = f"[{number(event.threshold[0])}, {number(event.threshold[1])}]"
+    else:
+        band = number(event.threshold)
+    where = f"{event.input} {number(event.value)} rad {event.when} {band}"
     return f"terrain switch ({how}): {where}; {moves}"
 
 

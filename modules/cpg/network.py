@@ -518,7 +518,7 @@ class CPGNetwork:
 
     #: what ``arm_terrain_switch`` takes
     TERRAIN_SWITCH_MODES = ("at_once", "gradual")
-    TERRAIN_SWITCH_WHEN = ("above", "below")
+    TERRAIN_SWITCH_WHEN = ("above", "below", "outside")
 
     def arm_terrain_switch(
         self,
@@ -539,8 +539,9 @@ class CPGNetwork:
         (default all; None: unchanged) from their values at that tick to the new ones: ``mode`` "at_once" in that
         tick, "gradual" linearly over ``seconds`` (the thesis's "switching occurs gradually", L1766). Per batch copy.
         ``band`` = (k, seconds) instead of a ``threshold``: the threshold is measured on the walk itself, the input's
-        mean +- k x its half range (- below, + above) over ``seconds`` from ``after`` (digest §7.17's rule, "defined
-        with taking into account the oscillation range of the torso", L1759), and detection starts once it is known.
+        mean +- k x its half range (- below, + above, either for "outside") over ``seconds`` from ``after`` (digest
+        §7.17's rule, "defined with taking into account the oscillation range of the torso", L1759), and detection
+        starts once it is known.
         ``reset`` disarms it; the switches are in ``terrain_switch_events``."""
         if input not in self.circuit.inputs:
             raise ValueError(
@@ -563,6 +564,8 @@ class CPGNetwork:
             raise ValueError(f"switch_band: expected (k >= 0, seconds > 0); got {band!r}")
         if band is None and threshold is None:
             raise ValueError("terrain switch: expected a threshold, or a band to measure it by")
+        if when == "outside" and band is None:
+            raise ValueError("switch_when 'outside': expected a band (switch_band) to leave; got a threshold")
         self._terrain = _TerrainSwitch(
             self, input, threshold, when, after, mode, seconds, gains or {}, sigma_s, sigma_joints, band
         )
@@ -892,12 +895,16 @@ class CPGNetwork:
                 ts.total += value
                 ts.count += 1
             if self.time + 1e-9 >= ts.measured_to - self._dt_last:  # the window's last tick: the threshold is known
-                sign = 1.0 if ts.above else -1.0
-                ts.threshold = ts.total / max(ts.count, 1) + sign * ts.band[0] * (ts.high - ts.low) / 2
+                mean, half = ts.total / max(ts.count, 1), ts.band[0] * (ts.high - ts.low) / 2
+                ts.threshold = mean + half if ts.above else mean - half  # "outside": the lower edge here ...
+                ts.upper = mean + half  # ... and the upper one
             return
         if self.time >= ts.after - 1e-9:
             value = phi[:, ts.input]
-            due = (value >= ts.threshold if ts.above else value <= ts.threshold) & ~ts.fired
+            if ts.when == "outside":  # leaving the gait's band either way
+                due = ((value <= ts.threshold) | (value >= ts.upper)) & ~ts.fired
+            else:
+                due = (value >= ts.threshold if ts.above else value <= ts.threshold) & ~ts.fired
             if due.any():
                 self._start_terrain_switch(ts, due, value)
         moving = ts.fired & ~ts.done
@@ -945,7 +952,9 @@ class CPGNetwork:
                 time=self.time,
                 input=ts.input_name,
                 value=per_copy(value[due]),
-                threshold=per_copy(ts.threshold[due]),
+                threshold=per_copy(ts.threshold[due])
+                if ts.when != "outside"
+                else (per_copy(ts.threshold[due]), per_copy(ts.upper[due])),
                 when=ts.when,
                 mode=ts.mode,
                 seconds=ts.seconds,
