@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# Chapter 5 of the thesis on the humanoid, end to end (docs/results/chapter5.md): every experiment a scenario that
+# `sfl run` runs over processes (records, a Rerun recording, a status) into runs/chapter5/, `sfl report` writing the
+# pages and figures into docs/results/chapter5/.
+#   pre-sweep  the 5 x 5 x 5 grid that chose the learning ranges (scenarios/e5_presweep.yaml)
+#   E5.1       learning with and without QARL, vigilance fixed at -0.15, 500 trials, seeds 0-2 (scenarios/e5_learn.yaml)
+#   E5.2       adaptive against fixed vigilance, flat and 10 deg uphill (the fixed flat runs are E5.1's with QARL)
+#   E5.3       maps per slope (flat, up and down 10 deg, adaptive vigilance, QARL), and walking flat -> uphill and
+#              downhill -> flat with and without switching between the learnt neurons (scenarios/e5_switch.yaml)
+# Two runs at a time (JOBS, default 2: learning is one trial after another, so a run keeps one core busy). A run
+# folder that already holds a completed run is kept (re-running resumes). TRIALS sets E5.2/E5.3's budget (default 300).
+#   bash docs/experiments/chapter5.sh
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+OUT=${OUT:-runs/chapter5}
+RESULTS=${RESULTS:-docs/results/chapter5}
+JOBS=${JOBS:-2}
+TRIALS=${TRIALS:-300}
+mkdir -p "$OUT" "$RESULTS"
+
+source docs/experiments/_once.sh  # once DIR COMMAND...: a completed run folder is kept
+export -f once
+
+# the pre-sweep (its two body workers use both cores)
+once "$OUT/presweep" sfl run scenarios/e5_presweep.yaml
+sfl report "$OUT/presweep" --out "$RESULTS"
+
+UP="--set conditions.body.slope_deg=10 --set conditions.controller.start_slope_deg=10"
+DOWN="--set conditions.body.slope_deg=-10 --set conditions.controller.start_slope_deg=-10"
+ADAPTIVE="--set modules.vigilance.params.mode=adaptive --set modules.vigilance.params.value=0"
+SHORT="--set protocol.trials=$TRIALS"
+{
+  for seed in 0 1 2; do
+    S="--set seed=$seed --set lockstep.pin_cpus=never"  # runs side by side: the OS spreads them over the cores
+    echo "once $OUT/qarl_s$seed sfl run scenarios/e5_learn.yaml $S"
+    echo "once $OUT/noqarl_s$seed sfl run scenarios/e5_learn.yaml $S --set modules.ofc.params.enabled=false"
+    echo "once $OUT/flat_adaptive_s$seed sfl run scenarios/e5_learn.yaml $S $SHORT $ADAPTIVE"
+    echo "once $OUT/uphill_fixed_s$seed sfl run scenarios/e5_learn.yaml $S $SHORT $UP"
+    echo "once $OUT/uphill_adaptive_s$seed sfl run scenarios/e5_learn.yaml $S $SHORT $UP $ADAPTIVE"
+    echo "once $OUT/downhill_adaptive_s$seed sfl run scenarios/e5_learn.yaml $S $SHORT $DOWN $ADAPTIVE"
+  done
+} | xargs -P "$JOBS" -I{} bash -c "{}"
+sfl report "$OUT"/qarl_s* "$OUT"/noqarl_s* "$OUT"/flat_adaptive_s* "$OUT"/uphill_fixed_s* "$OUT"/uphill_adaptive_s* \
+  "$OUT"/downhill_adaptive_s* --out "$RESULTS"
+
+# walking from one terrain onto another, with each seed's learnt neurons (two body workers: both cores)
+for seed in 0 1 2; do
+  once "$OUT/switch_s$seed" sfl run scenarios/e5_switch.yaml --set seed=$seed \
+    --set "protocol.best_of.flat=$OUT/flat_adaptive_s$seed" \
+    --set "protocol.best_of.uphill=$OUT/uphill_adaptive_s$seed" \
+    --set "protocol.best_of.downhill=$OUT/downhill_adaptive_s$seed"
+done
+sfl report "$OUT"/switch_s0 "$OUT"/switch_s1 "$OUT"/switch_s2 --out "$RESULTS"
