@@ -183,6 +183,10 @@ def self_contained(plan: Plan, run_dir: Path) -> dict:
     return resolved
 
 
+#: a pathspec of what runs write into the source tree (docs/results): outputs, not changes to the code that ran
+OUTPUTS = ":!docs/results"
+
+
 def provenance() -> dict:
     """What produced a run: package versions, Python, the platform and the source commit."""
     from importlib import metadata
@@ -202,7 +206,8 @@ def provenance() -> dict:
         if head.returncode == 0:
             commit = head.stdout.strip()
             status = subprocess.run(
-                ["git", "-C", str(source), "status", "--porcelain", "--untracked-files=no"],
+                # the results a chapter script writes as it goes (docs/results) are outputs, not the source
+                ["git", "-C", str(source), "status", "--porcelain", "--untracked-files=no", "--", ".", OUTPUTS],
                 capture_output=True,
                 text=True,
                 timeout=5,
