@@ -46,7 +46,7 @@ def walk(body_params=None, seed=0, phase_reset=True, start_noise=0.02, controlle
 
 
 def strikes_from_inputs(controller: Recording, threshold=50.0, refractory=0.4) -> np.ndarray:
-    """The script's rule (docs/experiments/e4_3_e4_4_pushes.py), on what the controller sensed: the left heel force
+    """The former E4.3-E4.4 script's rule, on what the controller sensed: the left heel force
     rising through 50 N, a rise within 0.4 s of the last strike the same landing; tick k's sensors are at k x DT."""
     names = list(controller.circuit.inputs)
     heel = np.array(controller.inputs)[:, names.index("heel_l")] >= threshold

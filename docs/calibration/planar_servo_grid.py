@@ -46,7 +46,7 @@ from sfl_brain.modules.controllers.cpg import CPGController, CPGParams  # noqa: 
 
 LEG_JOINTS = ["hip_l", "hip_r", "knee_l", "knee_r", "ankle_l", "ankle_r"]
 CROUCH = -0.3  # rad: the knees' start, as E4.2 (scenarios/e4_2_learn.yaml); hips and ankles half as much
-START_NOISE = 0.02  # as docs/experiments/e4_3_e4_4_pushes.py
+START_NOISE = 0.02  # as the former E4.3-E4.4 script (the scenarios now use 0.05)
 SIGMA_RANGE = (0.0, 5.0)  # Tables 4.1-4.3
 CIRCUITS = {"planar_8link": PlanarWalker8, "planar_8link_servo": PlanarWalker8Servo}
 
