@@ -1,7 +1,9 @@
+import json
 import textwrap
 
 import numpy as np
 import pytest
+import yaml
 
 from sfl_brain.scenario import ScenarioError, load
 
@@ -34,9 +36,29 @@ def test_shipped_scenarios_are_valid(tmp_path):
 
     maps = tmp_path / "acc.npz"  # exploit scenarios read the maps of a learn run: give them some
     ACC(ACC.Params(shape=(5, 5, 5), dim=3), seed=0).checkpoint(maps)
+    run = tmp_path / "learnt"  # conditions read the best parameters of completed learn runs (best_of): give them one
+    run.mkdir()
+    point = {"gain_pitch": 1.0, "gain_roll": 1.0, "sigma_s": 4.0, "v_unit": [0.5, 0.5, 0.5]}
+    (run / "summary.json").write_text(json.dumps({"status": "completed", "best": {"neuron_point": point}}))
     for path in sorted(SCENARIOS.glob("*.yaml")):
         text = path.read_text()
-        load(path, [f"protocol.maps={maps}"] if "kind: exploit" in text else [])
+        raw = yaml.safe_load(text)
+        sets = [f"protocol.maps={maps}"] if "kind: exploit" in text else []
+        sets += [f"protocol.best_of.{name}={run}" for name in (raw["protocol"].get("best_of") or {})]
+        load(path, sets)
+
+
+def test_a_scenario_whose_learnt_runs_are_missing_says_which(tmp_path):
+    """On a fresh clone, e5_switch.yaml's learn runs do not exist yet: the check names each one, not a traceback."""
+    with pytest.raises(ScenarioError) as info:
+        load(
+            SCENARIOS / "e5_switch.yaml",
+            [f"protocol.best_of.{n}={tmp_path / n}" for n in ("flat", "uphill", "downhill")],
+        )
+    for name in ("flat", "uphill", "downhill"):
+        assert f"protocol.best_of.{name}: expected a completed learn run's folder (with summary.json)" in str(
+            info.value
+        )
 
 
 def test_bad_enum_names_file_path_expected_given_and_nearest(write_scenario):
