@@ -1,0 +1,278 @@
+"""The physical floor of a lockstep pair: two processes taking turns, one tick after the other.
+
+A body (this process) does ``work`` of computation, sends a frame (240 bytes) and waits for the
+command (96 bytes) that its controller (a child process) sends back after its own work. How the
+two wait and where they run is all that differs between the variants:
+
+* ``pipe``: an OS pipe each way, both blocking in ``read``: the cheapest blocking hand-over there is;
+* ``shm``: a shared-memory sequence number each way, both spinning: no wake-up at all, but each
+  side holds a core (on a shared core, or beside a busy process, it starves the other);
+* ``zenoh``: bare Zenoh pub/sub, both blocking in a ring channel's ``recv()``, on the run's mesh
+  configuration (``bus.config``) or on the lockstep link (``bus.tick_config``: lowlatency, no QoS);
+
+each placed ``one core`` (both pinned to the same core, as ``lockstep.pin_cpus: auto`` places a
+pair), ``two cores`` (one each, as ``pin_cpus`` used to) or ``free`` (not pinned). ``one_process``
+is the same work without a second process. The work is a calibrated count of interpreter loop
+iterations (not a wall-clock wait), so a tick that is preempted does not pass for work done.
+
+``Busy`` starts a process that spins, unpinned: a busy neighbour (a viewer, another run).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+FRAME, COMMAND = 240, 96  # bytes a tick: a planar walker's sensor frame and motor command, about
+
+
+def calibrate(us: float) -> int:
+    """Loop iterations that take ``us`` microseconds here (the fastest of a few tries)."""
+    n = 100_000
+    best = min(_timed(n) for _ in range(5))
+    return max(int(n * us * 1e-6 / best), 0)
+
+
+def _timed(n: int) -> float:
+    t = time.perf_counter()
+    for _ in range(n):
+        pass
+    return time.perf_counter() - t
+
+
+def work(n: int) -> None:
+    for _ in range(n):
+        pass
+
+
+def one_process(ticks: int, body_n: int, controller_n: int) -> float:
+    """Seconds for ``ticks`` ticks of both sides' work in one process."""
+    t = time.perf_counter()
+    for _ in range(ticks):
+        work(body_n)
+        work(controller_n)
+    return time.perf_counter() - t
+
+
+# every pong: pinned first (argv[1]: JSON cores or null), gone with its parent, then its own set-up
+PREAMBLE = textwrap.dedent("""
+    import json, os, sys, threading, time
+    sys.path.insert(0, {root!r})
+    from sfl_brain.placement import pin
+    pin(json.loads(sys.argv[1]))
+    PARENT = os.getppid()
+    def orphaned():
+        while os.getppid() == PARENT:
+            time.sleep(0.5)
+        os._exit(1)
+    threading.Thread(target=orphaned, daemon=True).start()
+    N = {controller_n}
+    def work(n):
+        for _ in range(n):
+            pass
+""")
+PONG_PIPE = textwrap.dedent("""
+    r, w = int(sys.argv[2]), int(sys.argv[3])
+    reply = b"c" * {command}
+    while True:
+        data = os.read(r, 65536)
+        if not data or data == b"stop":
+            break
+        work(N)
+        os.write(w, reply)
+""")
+PONG_SHM = textwrap.dedent("""
+    import mmap
+    f = open(sys.argv[2], "r+b")
+    shm = mmap.mmap(f.fileno(), 8)
+    buf = memoryview(shm)
+    seen = 0
+    while True:
+        while buf[0] == seen:  # the body's sequence number (mod 256)
+            pass
+        seen = buf[0]
+        if buf[2] == 1:
+            break
+        work(N)
+        buf[1] = seen  # the command for this tick
+    buf.release()
+    shm.close()
+    f.close()
+""")
+PONG_ZENOH = textwrap.dedent("""
+    import zenoh
+    from sfl_brain import bus
+    os.environ.setdefault("ZENOH_RUNTIME", bus.RUNTIME)
+    link = sys.argv[2]
+    conf = bus.config([], [sys.argv[3]]) if link == "mesh" else bus.tick_config([], [sys.argv[3]])
+    s = zenoh.open(conf)
+    pub = s.declare_publisher("floor/command")
+    reply = b"c" * {command}
+    if os.environ.get("FLOOR_CALLBACK"):
+        done = threading.Event()
+        def answer(sample):
+            if sample.payload.to_bytes() == b"stop":
+                done.set()
+                return
+            work(N)
+            pub.put(reply)
+        sub = s.declare_subscriber("floor/frame", zenoh.handlers.Callback(answer, indirect=False))
+        done.wait()
+        s.close()
+        sys.exit()
+    sub = s.declare_subscriber("floor/frame", zenoh.handlers.RingChannel(64))
+    while True:
+        data = sub.recv().payload.to_bytes()
+        if data == b"stop":
+            break
+        work(N)
+        pub.put(reply)
+    s.close()
+""")
+
+
+class Pair:
+    """A body here and its controller in a child process, exchanging one tick at a time over ``kind``
+    (``pipe``, ``shm``, ``zenoh-mesh`` or ``zenoh-tick``); ``mine`` and ``theirs``: the cores of each
+    (None: not pinned); the body pins itself only while it runs ticks."""
+
+    def __init__(self, kind: str, controller_n: int, mine, theirs, tmp: Path) -> None:
+        self.kind, self.mine = kind, mine
+        source = PREAMBLE.format(root=str(ROOT), controller_n=controller_n)
+        args: list[str] = []
+        self._close = []
+        if kind == "pipe":
+            self.r, pong_w = os.pipe()
+            pong_r, self.w = os.pipe()
+            source += PONG_PIPE.format(command=COMMAND)
+            args = [str(pong_r), str(pong_w)]
+            self.proc = subprocess.Popen(
+                [sys.executable, "-c", source, json.dumps(theirs), *args], pass_fds=(pong_r, pong_w)
+            )
+            os.close(pong_r)
+            os.close(pong_w)
+        elif kind == "shm":
+            import mmap
+
+            self.path = tmp / f"floor{os.getpid()}-{id(self)}.shm"
+            self.path.write_bytes(bytes(8))
+            self._file = open(self.path, "r+b")  # noqa: SIM115 - closed in close()
+            self.shm = mmap.mmap(self._file.fileno(), 8)
+            self.buf = memoryview(self.shm)
+            source += PONG_SHM
+            self.proc = subprocess.Popen([sys.executable, "-c", source, json.dumps(theirs), str(self.path)])
+        else:
+            import zenoh
+
+            from sfl_brain import bus
+
+            link = kind.partition("-")[2]
+            if link == "mesh":
+                endpoint = bus.free_endpoint()
+                conf = bus.config([endpoint], [])
+            elif link == "ticktcp":
+                endpoint = bus.free_endpoint()
+                conf = bus.tick_config([endpoint], [])
+            else:
+                endpoint = bus.tick_endpoint(tmp, f"floor{os.getpid()}-{id(self)}")
+                conf = bus.tick_config([endpoint], [])
+            os.environ.setdefault("ZENOH_RUNTIME", bus.RUNTIME)
+            self.session = zenoh.open(conf)
+            self.pub = self.session.declare_publisher("floor/frame")
+            self.sub = self.session.declare_subscriber("floor/command", zenoh.handlers.RingChannel(64))
+            source += PONG_ZENOH.format(command=COMMAND)
+            self.proc = subprocess.Popen([sys.executable, "-c", source, json.dumps(theirs), link, endpoint])
+            deadline = time.monotonic() + 30
+            while not self.pub.matching_status.matching:
+                if time.monotonic() > deadline or self.proc.poll() is not None:
+                    raise RuntimeError(f"{kind}: the controller did not subscribe")
+                time.sleep(0.01)
+        self.seq = 0
+
+    def run(self, ticks: int, body_n: int) -> float:
+        """Seconds for ``ticks`` ticks: the body's work, the frame out, the command back."""
+        from sfl_brain.placement import pin, usable_cpus
+
+        before = usable_cpus()
+        pin(self.mine)
+        try:
+            return getattr(self, "_run_" + self.kind.partition("-")[0])(ticks, body_n)
+        finally:
+            pin(before)
+
+    def _run_pipe(self, ticks: int, body_n: int) -> float:
+        r, w, frame = self.r, self.w, b"f" * FRAME
+        read, write = os.read, os.write
+        t = time.perf_counter()
+        for _ in range(ticks):
+            work(body_n)
+            write(w, frame)
+            read(r, 65536)
+        return time.perf_counter() - t
+
+    def _run_shm(self, ticks: int, body_n: int) -> float:
+        buf = self.buf
+        seq = self.seq
+        t = time.perf_counter()
+        for _ in range(ticks):
+            work(body_n)
+            seq = (seq + 1) % 256
+            buf[0] = seq
+            while buf[1] != seq:
+                pass
+        elapsed = time.perf_counter() - t
+        self.seq = seq
+        return elapsed
+
+    def _run_zenoh(self, ticks: int, body_n: int) -> float:
+        put, recv, frame = self.pub.put, self.sub.recv, b"f" * FRAME
+        t = time.perf_counter()
+        for _ in range(ticks):
+            work(body_n)
+            put(frame)
+            recv()
+        return time.perf_counter() - t
+
+    def close(self) -> None:
+        if self.kind == "pipe":
+            os.write(self.w, b"stop")
+            self.proc.wait(timeout=10)
+            os.close(self.r)
+            os.close(self.w)
+        elif self.kind == "shm":
+            self.buf[2] = 1
+            self.buf[0] = (self.seq + 1) % 256
+            self.proc.wait(timeout=10)
+            self.buf.release()
+            self.shm.close()
+            self._file.close()
+            self.path.unlink()
+        else:
+            self.pub.put(b"stop")
+            self.proc.wait(timeout=10)
+            self.sub.undeclare()
+            self.pub.undeclare()
+            self.session.close()
+
+
+class Busy:
+    """A process that spins (unpinned) until closed: one busy neighbour."""
+
+    def __init__(self) -> None:
+        self.proc = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+
+    def close(self) -> None:
+        self.proc.kill()
+        self.proc.wait()
+
+
+def load() -> str:
+    """The load averages over 1, 5 and 15 minutes, and the cores: how busy the machine was."""
+    one, five, fifteen = os.getloadavg()
+    return f"load average {one:.2f} {five:.2f} {fifteen:.2f} on {os.cpu_count()} cores"
