@@ -176,9 +176,6 @@ class Pair:
             if link == "mesh":
                 endpoint = bus.free_endpoint()
                 conf = bus.config([endpoint], [])
-            elif link == "ticktcp":
-                endpoint = bus.free_endpoint()
-                conf = bus.tick_config([endpoint], [])
             else:
                 endpoint = bus.tick_endpoint(tmp, f"floor{os.getpid()}-{id(self)}")
                 conf = bus.tick_config([endpoint], [])
@@ -272,7 +269,7 @@ class Busy:
         self.proc.wait()
 
 
-def load() -> str:
+def machine_load() -> str:
     """The load averages over 1, 5 and 15 minutes, and the cores: how busy the machine was."""
     one, five, fifteen = os.getloadavg()
     return f"load average {one:.2f} {five:.2f} {fifteen:.2f} on {os.cpu_count()} cores"
