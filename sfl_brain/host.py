@@ -440,6 +440,10 @@ class Host:
             tick = spec.get("tick")
             if tick:
                 self.ticks = ticks = bus.open_tick_session(tick.get("listen", []), tick.get("connect", []))
+                ends = [f"listening on {e}" for e in tick.get("listen", [])] + [
+                    f"connecting to {e}" for e in tick.get("connect", [])
+                ]
+                log.info("lockstep link (lowlatency): %s", ", ".join(ends))
             rec = make_recording(self.run_id, spec.get("rrd"), spec.get("viewer"))
             live = bool(spec.get("viewer"))
             seconds = spec.get("trial_seconds")
