@@ -61,3 +61,58 @@ def test_a_run_limited_to_one_core_by_taskset_pins_nothing(tmp_path):
     assert line in done.stdout.splitlines()
     assert all("pinned to cores" not in text for text in logs(out).values())
     assert json.loads((out / "logs" / "placement.json").read_text())["cores"] == {}
+
+
+def test_on_its_link_the_body_takes_only_its_trials_command_and_counts_the_rest(tmp_path):
+    """The body's end of a lockstep link connects to its controller only (nothing else can reach it), and even
+    from there it takes only the command with this trial's nonce, trial and tick: the rest is counted and dropped."""
+    import threading
+
+    import numpy as np
+    import zenoh
+
+    from sfl_brain import bus
+    from sfl_brain.host import BusLink
+    from sfl_brain.messages import Ack, ControllerReset, MotorCommand, SensorFrame, decode, encode
+
+    endpoint = bus.tick_endpoint(tmp_path, "0")
+    mesh = bus.open_session([bus.free_endpoint()], [])
+    controller_end = bus.open_tick_session([endpoint], [])
+    body_end = bus.open_tick_session([], [endpoint])
+    seal = bus.Seal(None)
+
+    def reset(query):  # the controller's reset, as its host answers it
+        nonce, body = seal.open_request(str(query.key_expr), query.payload.to_bytes())
+        assert type(decode(body)) is ControllerReset
+        query.reply(query.key_expr, seal.seal_reply(nonce, encode(Ack())))
+        query.drop()
+
+    queryable = mesh.declare_queryable(bus.key("r", "controller", ControllerReset.TAG), reset)
+    frames = controller_end.declare_subscriber(
+        bus.key("r", "controller", SensorFrame.TAG), zenoh.handlers.RingChannel(8)
+    )
+    commands = controller_end.declare_publisher(bus.key("r", "body", MotorCommand.TAG))
+
+    def answer():  # garbage, another trial's nonce, a stale tick, then the command
+        data = frames.recv().payload.to_bytes()
+        nonce, frame = data[-8:], decode(data[:-8])
+
+        def command(trial, tick):
+            return encode(MotorCommand(trial_id=trial, tick=tick, values=np.ones(2)))
+
+        for payload in (b"\x00garbage", command(7, 0) + bytes(8), command(frame.trial_id, 5) + nonce, b"\xc1" + nonce):
+            commands.put(payload)
+        commands.put(command(frame.trial_id, frame.tick) + nonce)
+
+    link = BusLink(mesh, "r", "body", "controller", timeout=10.0, ticks=body_end)
+    try:
+        link.reset(ControllerReset(trial_id=7, seed=0, params={}, sensors=["a"], commands=["b", "c"]))
+        threading.Thread(target=answer, daemon=True).start()
+        got = link.step(SensorFrame(trial_id=7, tick=0, values=np.zeros(1)))
+        assert (got.trial_id, got.tick, list(got.values)) == (7, 0, [1.0, 1.0])
+        assert link.drops.counts == {"foreign": 2, "stale": 1, "malformed": 1}
+    finally:
+        link.close()
+        queryable.undeclare()
+        for session in (body_end, controller_end, mesh):
+            session.close()
