@@ -117,25 +117,29 @@ class Framework:
         self.pair.close()
 
 
-def startup(repeats=3):
+def startup(repeats: int = 5) -> dict[str, np.ndarray]:
+    """``sfl run`` to all modules alive and to the first trial done, with the pair placed (``pin_cpus: auto``)
+    and not (``never``), interleaved: (ready s, first trial s) per run."""
     from sfl_brain.run import run
     from sfl_brain.scenario import load
 
-    ready = []
     root = Path(__file__).resolve().parents[1]
+    times: dict[str, list] = {"auto": [], "never": []}
     for _ in range(repeats):
-        plan = load(root / "scenarios" / "quickstart.yaml", ["protocol.trials=1", "record.body_every=0"])
-        first = {}
-        t0 = time.perf_counter()
-        with tempfile.TemporaryDirectory() as tmp:
-            run(
-                plan,
-                Path(tmp) / "run",
-                on_ready=lambda sup, s, f=first: f.setdefault("ready", s),
-                on_progress=lambda p, f=first, t0=t0: f.setdefault("trial", time.perf_counter() - t0),
-            )
-        ready.append((first["ready"], first["trial"]))
-    return np.array(ready)
+        for mode in times:
+            sets = ["protocol.trials=1", "record.body_every=0", f"lockstep.pin_cpus={mode}"]
+            plan = load(root / "scenarios" / "quickstart.yaml", sets)
+            first = {}
+            t0 = time.perf_counter()
+            with tempfile.TemporaryDirectory() as tmp:
+                run(
+                    plan,
+                    Path(tmp) / "run",
+                    on_ready=lambda sup, s, f=first: f.setdefault("ready", s),
+                    on_progress=lambda p, f=first, t0=t0: f.setdefault("trial", time.perf_counter() - t0),
+                )
+            times[mode].append((first["ready"], first["trial"]))
+    return {mode: np.array(t) for mode, t in times.items()}
 
 
 def rounds(sides: dict, reference: str, repeats: int, ticks: int, block: int, body_n: int) -> dict[str, list[float]]:
@@ -232,11 +236,12 @@ def main() -> None:
         print(f"  {name:<{width}}  {np.median(r):5.2f}  (IQR {q1:.2f}-{q3:.2f})")
     if args.no_startup:
         return
-    s = startup()
-    print(
-        f"sfl run start-up, 5 module processes: ready {np.median(s[:, 0]):.2f} s, first trial done "
-        f"{np.median(s[:, 1]):.2f} s (median of {len(s)}; goal <= 2 s)"
-    )
+    started = startup()
+    for mode, s in started.items():
+        print(
+            f"sfl run start-up, 5 module processes, lockstep.pin_cpus {mode}: all alive {np.median(s[:, 0]):.2f} s, "
+            f"first trial done {np.median(s[:, 1]):.2f} s (median of {len(s)}, interleaved; goal <= 2 s)"
+        )
     print(f"after: {_floor.machine_load()}")
 
 
