@@ -105,3 +105,23 @@ class HostedPair:
         for proc in self.procs:
             proc.terminate()
             proc.wait(timeout=10)
+
+
+class Pinned:
+    """While in the block, this process runs on ``cores`` (None: as it was): a one-process figure on the core a
+    pair runs on, so that both meet the same neighbours on a busy machine."""
+
+    def __init__(self, cores) -> None:
+        self.cores = cores
+
+    def __enter__(self):
+        from sfl_brain.placement import pin, usable_cpus
+
+        self.before = usable_cpus()
+        pin(self.cores)
+        return self
+
+    def __exit__(self, *exc):
+        from sfl_brain.placement import pin
+
+        pin(self.before)

@@ -9,7 +9,7 @@ variant runs ``--ticks`` ticks per round, in blocks of ``--block`` ticks taken i
 other variant (interleaved finely, so that all see the same machine load); each figure is the
 median over ``--repeats`` rounds of the variant's time over the one-process time of the same round.
 
-(one process) the work, then the open-loop controller through ``InProcessLink``;
+(one process) the work, then the open-loop controller through ``InProcessLink``, on the core a pair gets;
 (pipe) an OS pipe each way, both blocking: on two cores, and both on one core;
 (shared memory) both spinning on a sequence number, not pinned;
 (bare Zenoh) pub/sub, both blocking in a ring channel's recv(): on the run's mesh configuration
@@ -53,22 +53,29 @@ RESET = ControllerReset(trial_id=0, seed=0, params={}, sensors=SENSORS, commands
 
 
 class OneProcess:
-    """The body's work, then the open-loop controller through InProcessLink."""
+    """The body's work, then the open-loop controller through InProcessLink, on ``cores`` (the pair's core,
+    so that both meet the same neighbours on a busy machine; None: not pinned)."""
 
-    def __init__(self) -> None:
+    def __init__(self, cores=None) -> None:
+        self.mine = cores
         self.link = InProcessLink(OpenLoopController())
         self.link.reset(RESET)
         self.values = np.zeros(len(SENSORS))
         self.tick = 0
 
     def run(self, ticks: int, body_n: int) -> float:
-        step, values, work = self.link.step, self.values, _floor.work
-        t = time.perf_counter()
-        for _ in range(ticks):
-            work(body_n)
-            step(SensorFrame(trial_id=0, tick=self.tick, values=values))
-            self.tick += 1
-        return time.perf_counter() - t
+        before = usable_cpus()
+        pin(self.mine)
+        try:
+            step, values, work = self.link.step, self.values, _floor.work
+            t = time.perf_counter()
+            for _ in range(ticks):
+                work(body_n)
+                step(SensorFrame(trial_id=0, tick=self.tick, values=values))
+                self.tick += 1
+            return time.perf_counter() - t
+        finally:
+            pin(before)
 
     def close(self) -> None:
         pass
@@ -174,7 +181,7 @@ def main() -> None:
     session = bus.open_session([endpoint], [])
     folder = tempfile.mkdtemp(prefix="sfl-")
     tmp = Path(folder)
-    sides: dict = {"one process": OneProcess()}
+    sides: dict = {"one process": OneProcess(one)}
     spin = args.spin_us * 1e-6
     try:
         sides["pipe, both block, two cores"] = _floor.Pair("pipe", 0, *two, tmp)

@@ -10,7 +10,8 @@ interleaved so that all see the same machine load; medians over ``--repeats``; t
 (a') the body's whole trial with a constant controller in its process (the standing pose): (a) plus sensing (the
     foot pressure sensors read PyBullet's contact points), judging and the framework's tick (messages, checks);
 (b) the default gait: ``CPGController`` with the ``humanoid_nao`` circuit in the body's process (``InProcessLink``),
-    the trial as ``sfl run`` runs it with ``colocate: true``;
+    the trial as ``sfl run`` runs it with ``colocate: true``; (a), (a') and (b) run on the core (c) places its pair on,
+    so that all meet the same neighbours on a busy machine;
 (c) the same trial with controller and body each hosted in its own process by ``sfl_brain.host``, as ``sfl run`` hosts
     them: placed as ``lockstep.pin_cpus`` ``--pin`` says (default ``auto``: both on one core, blocking), their frames
     and commands on their lockstep link (Zenoh's lowlatency transport); the trial is a request from this process,
@@ -39,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import HostedPair  # noqa: E402
+from _common import HostedPair, Pinned  # noqa: E402
 from _floor import machine_load  # noqa: E402
 
 from sfl_brain import bus  # noqa: E402
@@ -162,10 +163,12 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
             over_bus = pair.trial()[1]
             assert over_bus == in_process, (over_bus, in_process)  # the same trial over processes, bit for bit
         whole_trial(standing_body)
+        core = pairs["c"].placement.of("body")  # the one-process trials run on the pair's core
         for _ in range(repeats):  # interleaved, so that all see the same machine load
-            times.setdefault("a", []).append(physics_only(physics_body))
-            times.setdefault("a1", []).append(whole_trial(standing_body)[0])
-            times.setdefault("b", []).append(whole_trial(cpg_body)[0])
+            with Pinned(core):
+                times.setdefault("a", []).append(physics_only(physics_body))
+                times.setdefault("a1", []).append(whole_trial(standing_body)[0])
+                times.setdefault("b", []).append(whole_trial(cpg_body)[0])
             for name, pair in pairs.items():
                 times.setdefault(name, []).append(pair.trial()[0])
         during = machine_load()

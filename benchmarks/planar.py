@@ -6,7 +6,8 @@
 Every figure below is a median over ``--repeats`` rounds in which every variant runs once, one after
 the other (interleaved, so that all see the same machine load); the load average is printed.
 
-(a) physics only, fixed open-loop command; (b) reflexive controller and body in one process;
+(a) physics only, fixed open-loop command; (b) reflexive controller and body in one process; both on
+    the core (c) places its pair on, so that both meet the same neighbours on a busy machine;
 (b0) the same with the body as it stepped before its hot path was batched (``_planar_before.py``),
     with the same metrics bit for bit (checked on every repeat);
 (c) controller and body each hosted in its own process by ``sfl_brain.host``, as ``sfl run`` hosts
@@ -17,8 +18,8 @@ the other (interleaved, so that all see the same machine load); the load average
     each command (``lockstep.spin_us``): the placement before issue 24;
 (c-mesh) the pair placed as (c), but its frames and commands on the run's mesh;
 then the floors of a lockstep pair doing the same work per tick as (b) (the body's share: (a) per
-tick; the controller's: (b) - (a)), as calibrated interpreter loops (``_floor.py``):
-    one process; a pipe, both on the pair's core; shared memory, both spinning, not pinned; bare
+tick; the controller's: (b) - (a), in CPU time), as calibrated interpreter loops (``_floor.py``):
+    one process (on the pair's core); a pipe, both on the pair's core; shared memory, both spinning, not pinned; bare
     Zenoh on the lockstep link's configuration, both on the pair's core: the framework's baseline;
 then (b), (c), the one-process floor, bare Zenoh and the spinning pair again beside one busy process
 (a process this benchmark starts, spinning, unpinned);
@@ -39,7 +40,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _floor  # noqa: E402
-from _common import HostedPair  # noqa: E402
+from _common import HostedPair, Pinned  # noqa: E402
 from _planar_before import PlanarBipedBefore  # noqa: E402
 
 from sfl_brain import bus  # noqa: E402
@@ -62,23 +63,23 @@ BODY = "sfl_brain.bodies.planar_biped:PlanarBiped"
 CONTROLLER = "sfl_brain.modules.controllers.reflex:ReflexController"
 
 
-def physics_only() -> float:
+def physics_only(clock=time.perf_counter) -> float:
     body = PlanarBiped()
     body.logging = False
     body.start_trial(REQUEST)
     command = np.array([1.0, -1.0, 0.5, 0.5])
-    t = time.perf_counter()
+    t = clock()
     for _ in range(TICKS):
         body.actuate(command)
-    return time.perf_counter() - t
+    return clock() - t
 
 
-def one_process(body_class=PlanarBiped) -> tuple[float, dict]:
+def one_process(body_class=PlanarBiped, clock=time.perf_counter) -> tuple[float, dict]:
     body = body_class()
     body.link = InProcessLink(ReflexController())
-    t = time.perf_counter()
+    t = clock()
     result = body.handle(REQUEST)
-    elapsed = time.perf_counter() - t
+    elapsed = clock() - t
     assert result.metrics["time"] >= 9.99, result
     return elapsed, {"success": result.success, "quality": result.quality, **result.metrics}
 
@@ -148,9 +149,10 @@ def main() -> None:
         hosted["c-mesh"] = Processes(session, endpoint, "benchplanarmesh", folder, pin=args.pin, link="mesh", spin=spin)
         for pair in hosted.values():
             pair.trial()  # warm up
-        # the floors do (b)'s work per tick: the body's share (a) and the controller's (b) - (a)
-        a0 = min(physics_only() for _ in range(3))
-        b0_ = min(one_process()[0] for _ in range(3))
+        # the floors do (b)'s work per tick: the body's share (a) and the controller's (b) - (a), in CPU time
+        # (a loaded machine's wall time would count the neighbours' time slices as work)
+        a0 = min(physics_only(time.thread_time) for _ in range(3))
+        b0_ = min(one_process(clock=time.thread_time)[0] for _ in range(3))
         body_n = _floor.calibrate(a0 / TICKS * 1e6)
         controller_n = _floor.calibrate(max(b0_ - a0, 0.0) / TICKS * 1e6)
         core = hosted["c"].placement.of("body")  # the pair's core (None: not pinned)
@@ -163,15 +165,19 @@ def main() -> None:
         def round_(into: dict[str, list[float]], names: list[str]) -> None:
             for name in names:
                 if name == "a":
-                    t = physics_only()
+                    with Pinned(core):
+                        t = physics_only()
                 elif name == "b":
-                    t, metrics = one_process()
+                    with Pinned(core):
+                        t, metrics = one_process()
                     if "b0" in names:
-                        t0, before = one_process(PlanarBipedBefore)
+                        with Pinned(core):
+                            t0, before = one_process(PlanarBipedBefore)
                         assert metrics == before, (metrics, before)  # the same trial, bit for bit
                         into.setdefault("b0", []).append(t0)
                 elif name == "floor":
-                    t = _floor.one_process(TICKS, body_n, controller_n)
+                    with Pinned(core):
+                        t = _floor.one_process(TICKS, body_n, controller_n)
                 elif name in hosted:
                     t = hosted[name].trial()
                 elif name in floors:
