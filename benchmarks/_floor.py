@@ -109,37 +109,36 @@ PONG_ZENOH = textwrap.dedent("""
     import zenoh
     from sfl_brain import bus
     os.environ.setdefault("ZENOH_RUNTIME", bus.RUNTIME)
-    link = sys.argv[2]
+    link, typed = sys.argv[2], sys.argv[4] == "typed"
     conf = bus.config([], [sys.argv[3]]) if link == "mesh" else bus.tick_config([], [sys.argv[3]])
     s = zenoh.open(conf)
+    sub = s.declare_subscriber("floor/frame", zenoh.handlers.RingChannel(64))
     pub = s.declare_publisher("floor/command")
     reply = b"c" * {command}
-    if os.environ.get("FLOOR_CALLBACK"):
-        done = threading.Event()
-        def answer(sample):
-            if sample.payload.to_bytes() == b"stop":
-                done.set()
-                return
-            work(N)
-            pub.put(reply)
-        sub = s.declare_subscriber("floor/frame", zenoh.handlers.Callback(answer, indirect=False))
-        done.wait()
-        s.close()
-        sys.exit()
-    sub = s.declare_subscriber("floor/frame", zenoh.handlers.RingChannel(64))
+    if typed:  # the framework's codec and the open-loop controller, by hand (no host, no checks)
+        from sfl_brain.messages import ControllerReset, SensorFrame, decoder_for, encode
+        from sfl_brain.modules.controllers.open_loop import OpenLoopController
+        controller = OpenLoopController()
+        controller.handle(ControllerReset(trial_id=0, seed=0, params={{}}, sensors={sensors!r}, commands={commands!r}))
+        decode_frame = decoder_for(SensorFrame)
     while True:
         data = sub.recv().payload.to_bytes()
         if data == b"stop":
             break
         work(N)
+        if typed:
+            reply = encode(controller.handle(decode_frame(data[:-8]), checked=True)) + data[-8:]
         pub.put(reply)
     s.close()
 """)
+SENSORS = ("hip_l", "hip_r", "knee_l", "knee_r", "contact_l", "contact_r", "slope", "pitch")
+COMMANDS = ("v_hip_l", "v_hip_r", "v_knee_l", "v_knee_r")
 
 
 class Pair:
     """A body here and its controller in a child process, exchanging one tick at a time over ``kind``
-    (``pipe``, ``shm``, ``zenoh-mesh`` or ``zenoh-tick``); ``mine`` and ``theirs``: the cores of each
+    (``pipe``, ``shm``, ``zenoh-mesh`` or ``zenoh-tick``; ``zenoh-tick-typed``: with the framework's codec and the
+    open-loop controller by hand, both sides); ``mine`` and ``theirs``: the cores of each
     (None: not pinned); the body pins itself only while it runs ticks."""
 
     def __init__(self, kind: str, controller_n: int, mine, theirs, tmp: Path) -> None:
@@ -172,7 +171,8 @@ class Pair:
 
             from sfl_brain import bus
 
-            link = kind.partition("-")[2]
+            link = kind.split("-")[1]
+            self.typed = kind.endswith("-typed")
             if link == "mesh":
                 endpoint = bus.free_endpoint()
                 conf = bus.config([endpoint], [])
@@ -183,8 +183,9 @@ class Pair:
             self.session = zenoh.open(conf)
             self.pub = self.session.declare_publisher("floor/frame")
             self.sub = self.session.declare_subscriber("floor/command", zenoh.handlers.RingChannel(64))
-            source += PONG_ZENOH.format(command=COMMAND)
-            self.proc = subprocess.Popen([sys.executable, "-c", source, json.dumps(theirs), link, endpoint])
+            source += PONG_ZENOH.format(command=COMMAND, sensors=list(SENSORS), commands=list(COMMANDS))
+            typed = "typed" if self.typed else "raw"
+            self.proc = subprocess.Popen([sys.executable, "-c", source, json.dumps(theirs), link, endpoint, typed])
             deadline = time.monotonic() + 30
             while not self.pub.matching_status.matching:
                 if time.monotonic() > deadline or self.proc.poll() is not None:
@@ -229,11 +230,29 @@ class Pair:
 
     def _run_zenoh(self, ticks: int, body_n: int) -> float:
         put, recv, frame = self.pub.put, self.sub.recv, b"f" * FRAME
+        if self.typed:
+            return self._run_typed(ticks, body_n)
         t = time.perf_counter()
         for _ in range(ticks):
             work(body_n)
             put(frame)
             recv()
+        return time.perf_counter() - t
+
+    def _run_typed(self, ticks: int, body_n: int) -> float:
+        """The framework's messages by hand: a SensorFrame encoded with a stream nonce, the MotorCommand decoded."""
+        import numpy as np
+
+        from sfl_brain.messages import MotorCommand, SensorFrame, decoder_for, encode
+
+        put, recv, decode_command = self.pub.put, self.sub.recv, decoder_for(MotorCommand)
+        values, nonce = np.zeros(len(SENSORS)), bytes(8)
+        t = time.perf_counter()
+        for _ in range(ticks):
+            work(body_n)
+            put(encode(SensorFrame(trial_id=0, tick=self.seq, values=values)) + nonce)
+            decode_command(recv().payload.to_bytes()[:-8])
+            self.seq += 1
         return time.perf_counter() - t
 
     def close(self) -> None:

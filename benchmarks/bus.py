@@ -15,6 +15,8 @@ median over ``--repeats`` rounds of the variant's time over the one-process time
 (bare Zenoh) pub/sub, both blocking in a ring channel's recv(): on the run's mesh configuration
     (TCP) on two cores and on one core, and on the lockstep link's configuration (lowlatency
     transport, QoS off, a Unix socket; ``bus.tick_config``) on one core;
+(typed by hand) bare Zenoh on the lockstep link with the framework's codec and the open-loop controller
+    written by hand (no host, no BusLink, no checks): what the messages cost, apart from the runtime;
 (framework) the body's ``BusLink`` to an open-loop controller hosted by ``sfl_brain.host``, typed,
     encoded, checked, dispatched: as ``sfl run`` runs a pair now (both on one core, blocking, on
     their lockstep link), and as before issue 24 (not pinned, ticks on the mesh, the body polling up
@@ -193,6 +195,7 @@ def main() -> None:
         )
         sides["bare Zenoh, mesh (tcp), both block, one core"] = _floor.Pair("zenoh-mesh", 0, one, one, tmp)
         sides["bare Zenoh, lockstep link, both block, one core"] = _floor.Pair("zenoh-tick", 0, one, one, tmp)
+        sides["  + typed messages and controller, by hand"] = _floor.Pair("zenoh-tick-typed", 0, one, one, tmp)
         sides["framework: lockstep link, both block, one core"] = Framework(
             session, endpoint, "benchnow", folder, "auto", "tick", spin
         )
@@ -231,11 +234,13 @@ def main() -> None:
         q1, q3 = np.percentile(r, [25, 75])
         print(f"  {name:<{width}}  {np.median(r):5.2f}  (IQR {q1:.2f}-{q3:.2f})")
     raw = np.median(ratios["bare Zenoh, lockstep link, both block, one core"])
+    typed = np.median(ratios["  + typed messages and controller, by hand"])
     framework = np.median(ratios["framework: lockstep link, both block, one core"])
     added = (framework - raw) * reference * 1e6
     print(
         f"  framework / bare Zenoh in the same configuration (lockstep link, one core): {framework / raw:.2f} "
-        f"(goal <= 1.10); the framework adds {added:.1f} us per tick"
+        f"(goal <= 1.10); the framework adds {added:.1f} us per tick, of which the typed messages and the "
+        f"controller's step by hand {(typed - raw) * reference * 1e6:.1f} us"
     )
     print(f"beside one busy process: medians of {args.busy_repeats} rounds; {beside}")
     for name, r in busy.items():

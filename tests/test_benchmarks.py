@@ -36,7 +36,7 @@ def test_bus_benchmark_prints_the_floors_bare_zenoh_and_the_framework_side_by_si
     assert "load average" in out  # how busy the machine was
     # one process, two pipes, shared memory, bare Zenoh (mesh on two cores and one core, the lockstep link) and the
     # framework before and now, then four of them beside one busy process
-    figures(out, r"  \S[^\n]*?  +([\d.]+)  \(IQR", count=9 + 4)
+    figures(out, r"  \S[^\n]*?  +([\d.]+)  \(IQR", count=10 + 4)
     figures(out, r"framework / bare Zenoh in the same configuration \(lockstep link, one core\): ([\d.]+)")
     figures(out, r"first trial done ([\d.]+) s", count=2)  # placed and not
 
