@@ -8,7 +8,10 @@ hand or by the benchmarks: without a secret, anyone on the bus may sign messages
 The host opens a Zenoh peer session, answers each request type the module
 handles on ``sfl/<run>/<instance>/<tag>``, publishes replies to stream messages
 (lockstep ticks) to the instance named in its routes, and declares a liveliness
-token once it is ready. Requests are handed to one loop in the main thread (a
+token once it is ready. A body worker and its controller process also open their
+lockstep link (``spec["tick"]``, :func:`bus.open_tick_session`), which carries their
+frames and commands; a host whose spec names cores (``spec["cpus"]``, from
+:mod:`sfl_brain.placement`) pins itself to them before any session starts. Requests are handed to one loop in the main thread (a
 trial may run for seconds); lockstep stream messages are answered by a thread
 that blocks in the subscriber's channel. A lock makes sure the module never sees
 two messages at once.
