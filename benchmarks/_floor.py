@@ -1,19 +1,23 @@
 """The physical floor of a lockstep pair: two processes taking turns, one tick after the other.
 
-A body (this process) does ``work`` of computation, sends a frame (240 bytes) and waits for the
-command (96 bytes) that its controller (a child process) sends back after its own work. How the
-two wait and where they run is all that differs between the variants:
+A body (this process) does its tick's work (a callable: the planar walker's physics, or a calibrated
+loop), sends a frame (240 bytes) and waits for the command (96 bytes) that its controller (a child
+process) sends back after its own work. How the two wait and where they run is all that differs
+between the variants:
 
 * ``pipe``: an OS pipe each way, both blocking in ``read``: the cheapest blocking hand-over there is;
 * ``shm``: a shared-memory sequence number each way, both spinning: no wake-up at all, but each
-  side holds a core (on a shared core, or beside a busy process, it starves the other);
+  side holds a core (on a shared core, or beside a busy process, it starves the other); the
+  controller spins only while the body runs ticks, and sleeps in between (it must not be a busy
+  neighbour of the other variants);
 * ``zenoh``: bare Zenoh pub/sub, both blocking in a ring channel's ``recv()``, on the run's mesh
   configuration (``bus.config``) or on the lockstep link (``bus.tick_config``: lowlatency, no QoS);
 
 each placed ``one core`` (both pinned to the same core, as ``lockstep.pin_cpus: auto`` places a
 pair), ``two cores`` (one each, as ``pin_cpus`` used to) or ``free`` (not pinned). ``one_process``
-is the same work without a second process. The work is a calibrated count of interpreter loop
-iterations (not a wall-clock wait), so a tick that is preempted does not pass for work done.
+is the same work without a second process. A calibrated work (:func:`calibrate`, :func:`work`) is a
+count of interpreter loop iterations, not a wall-clock wait, so a tick that is preempted does not
+pass for work done.
 
 ``Busy`` starts a process that spins, unpinned: a busy neighbour (a viewer, another run).
 """
@@ -51,11 +55,12 @@ def work(n: int) -> None:
         pass
 
 
-def one_process(ticks: int, body_n: int, controller_n: int) -> float:
-    """Seconds for ``ticks`` ticks of both sides' work in one process."""
+def one_process(ticks: int, tick, controller_n: int = 0) -> float:
+    """Seconds for ``ticks`` ticks of both sides' work in one process: ``tick()`` (the body's), then the
+    controller's loop."""
     t = time.perf_counter()
     for _ in range(ticks):
-        work(body_n)
+        tick()
         work(controller_n)
     return time.perf_counter() - t
 
@@ -92,15 +97,18 @@ PONG_SHM = textwrap.dedent("""
     f = open(sys.argv[2], "r+b")
     shm = mmap.mmap(f.fileno(), 8)
     buf = memoryview(shm)
+    go = int(sys.argv[3])
     seen = 0
-    while True:
-        while buf[0] == seen:  # the body's sequence number (mod 256)
-            pass
-        seen = buf[0]
-        if buf[2] == 1:
-            break
-        work(N)
-        buf[1] = seen  # the command for this tick
+    while os.read(go, 1) == b"g":  # spin only during the body's runs: idle, it must not be a busy neighbour
+        while True:
+            while buf[0] == seen:  # the body's sequence number (mod 256)
+                pass
+            seen = buf[0]
+            if buf[2] == 1:  # the run's end
+                buf[1] = seen
+                break
+            work(N)
+            buf[1] = seen  # the command for this tick
     buf.release()
     shm.close()
     f.close()
@@ -164,8 +172,12 @@ class Pair:
             self._file = open(self.path, "r+b")  # noqa: SIM115 - closed in close()
             self.shm = mmap.mmap(self._file.fileno(), 8)
             self.buf = memoryview(self.shm)
+            go, self.go = os.pipe()
             source += PONG_SHM
-            self.proc = subprocess.Popen([sys.executable, "-c", source, json.dumps(theirs), str(self.path)])
+            self.proc = subprocess.Popen(
+                [sys.executable, "-c", source, json.dumps(theirs), str(self.path), str(go)], pass_fds=(go,)
+            )
+            os.close(go)
         else:
             import zenoh
 
@@ -193,53 +205,60 @@ class Pair:
                 time.sleep(0.01)
         self.seq = 0
 
-    def run(self, ticks: int, body_n: int) -> float:
-        """Seconds for ``ticks`` ticks: the body's work, the frame out, the command back."""
+    def run(self, ticks: int, tick) -> float:
+        """Seconds for ``ticks`` ticks: the body's work (``tick()``), the frame out, the command back."""
         from sfl_brain.placement import pin, usable_cpus
 
         before = usable_cpus()
         pin(self.mine)
         try:
-            return getattr(self, "_run_" + self.kind.partition("-")[0])(ticks, body_n)
+            return getattr(self, "_run_" + self.kind.partition("-")[0])(ticks, tick)
         finally:
             pin(before)
 
-    def _run_pipe(self, ticks: int, body_n: int) -> float:
+    def _run_pipe(self, ticks: int, tick) -> float:
         r, w, frame = self.r, self.w, b"f" * FRAME
         read, write = os.read, os.write
         t = time.perf_counter()
         for _ in range(ticks):
-            work(body_n)
+            tick()
             write(w, frame)
             read(r, 65536)
         return time.perf_counter() - t
 
-    def _run_shm(self, ticks: int, body_n: int) -> float:
+    def _run_shm(self, ticks: int, tick) -> float:
         buf = self.buf
         seq = self.seq
+        os.write(self.go, b"g")  # the controller spins from now on
         t = time.perf_counter()
         for _ in range(ticks):
-            work(body_n)
+            tick()
             seq = (seq + 1) % 256
             buf[0] = seq
             while buf[1] != seq:
                 pass
         elapsed = time.perf_counter() - t
+        buf[2] = 1  # the run's end: the controller goes back to sleep
+        seq = (seq + 1) % 256
+        buf[0] = seq
+        while buf[1] != seq:
+            pass
+        buf[2] = 0
         self.seq = seq
         return elapsed
 
-    def _run_zenoh(self, ticks: int, body_n: int) -> float:
+    def _run_zenoh(self, ticks: int, tick) -> float:
         put, recv, frame = self.pub.put, self.sub.recv, b"f" * FRAME
         if self.typed:
-            return self._run_typed(ticks, body_n)
+            return self._run_typed(ticks, tick)
         t = time.perf_counter()
         for _ in range(ticks):
-            work(body_n)
+            tick()
             put(frame)
             recv()
         return time.perf_counter() - t
 
-    def _run_typed(self, ticks: int, body_n: int) -> float:
+    def _run_typed(self, ticks: int, tick) -> float:
         """The framework's messages by hand: a SensorFrame encoded with a stream nonce, the MotorCommand decoded."""
         import numpy as np
 
@@ -249,7 +268,7 @@ class Pair:
         values, nonce = np.zeros(len(SENSORS)), bytes(8)
         t = time.perf_counter()
         for _ in range(ticks):
-            work(body_n)
+            tick()
             put(encode(SensorFrame(trial_id=0, tick=self.seq, values=values)) + nonce)
             decode_command(recv().payload.to_bytes()[:-8])
             self.seq += 1
@@ -262,8 +281,8 @@ class Pair:
             os.close(self.r)
             os.close(self.w)
         elif self.kind == "shm":
-            self.buf[2] = 1
-            self.buf[0] = (self.seq + 1) % 256
+            os.write(self.go, b"s")
+            os.close(self.go)
             self.proc.wait(timeout=10)
             self.buf.release()
             self.shm.close()

@@ -30,6 +30,7 @@ trial (``--no-startup``: skipped).
 from __future__ import annotations
 
 import argparse
+import functools
 import shutil
 import sys
 import tempfile
@@ -65,14 +66,14 @@ class OneProcess:
         self.values = np.zeros(len(SENSORS))
         self.tick = 0
 
-    def run(self, ticks: int, body_n: int) -> float:
+    def run(self, ticks: int, tick) -> float:
         before = usable_cpus()
         pin(self.mine)
         try:
-            step, values, work = self.link.step, self.values, _floor.work
+            step, values = self.link.step, self.values
             t = time.perf_counter()
             for _ in range(ticks):
-                work(body_n)
+                tick()
                 step(SensorFrame(trial_id=0, tick=self.tick, values=values))
                 self.tick += 1
             return time.perf_counter() - t
@@ -105,14 +106,14 @@ class Framework:
         self.values = np.zeros(len(SENSORS))
         self.tick = 0
 
-    def run(self, ticks: int, body_n: int) -> float:
+    def run(self, ticks: int, tick) -> float:
         before = usable_cpus()
         pin(self.mine)
         try:
-            step, values, work = self.link.step, self.values, _floor.work
+            step, values = self.link.step, self.values
             t = time.perf_counter()
             for _ in range(ticks):
-                work(body_n)
+                tick()
                 step(SensorFrame(trial_id=0, tick=self.tick, values=values))
                 self.tick += 1
             return time.perf_counter() - t
@@ -151,14 +152,16 @@ def startup(repeats: int = 5) -> dict[str, np.ndarray]:
     return {mode: np.array(t) for mode, t in times.items()}
 
 
-def rounds(sides: dict, reference: str, repeats: int, ticks: int, block: int, body_n: int) -> dict[str, list[float]]:
-    """Each side's time over the reference's, per round; the sides take blocks of ticks in turn."""
+def rounds(sides: dict, reference: str, repeats: int, ticks: int, block: int, tick) -> dict[str, list[float]]:
+    """Each side's time over the reference's, per round; the sides take blocks of ticks in turn, in a shuffled order."""
     ratios: dict[str, list[float]] = {name: [] for name in sides}
+    order, shuffle = list(sides), np.random.default_rng(0).shuffle
     for _ in range(repeats):
         total = dict.fromkeys(sides, 0.0)
         for _ in range(max(ticks // block, 1)):
-            for name, side in sides.items():
-                total[name] += side.run(block, body_n)
+            shuffle(order)  # no variant always runs right after the same other one
+            for name in order:
+                total[name] += sides[name].run(block, tick)
         for name in sides:
             ratios[name].append(total[name] / total[reference])
     return ratios
@@ -177,7 +180,7 @@ def main() -> None:
     cpus = usable_cpus()
     one = [cpus[-1]] if len(cpus) > 1 else None  # as lockstep.pin_cpus auto places a pair
     two = ([cpus[0]], [cpus[-1]]) if len(cpus) > 1 else (None, None)
-    body_n = _floor.calibrate(args.work_us)
+    tick = functools.partial(_floor.work, _floor.calibrate(args.work_us))
     print(f"before: {_floor.machine_load()}", flush=True)
     endpoint = bus.free_endpoint()
     session = bus.open_session([endpoint], [])
@@ -200,8 +203,8 @@ def main() -> None:
             session, endpoint, "benchnow", folder, "auto", "tick", spin
         )
         for side in sides.values():
-            side.run(200, body_n)  # warm up
-        ratios = rounds(sides, "one process", args.repeats, args.ticks, args.block, body_n)
+            side.run(200, tick)  # warm up
+        ratios = rounds(sides, "one process", args.repeats, args.ticks, args.block, tick)
         during = _floor.machine_load()
         busy_names = [
             "one process",
@@ -212,12 +215,12 @@ def main() -> None:
         neighbour = _floor.Busy()
         try:
             busy = rounds(
-                {n: sides[n] for n in busy_names}, "one process", args.busy_repeats, args.ticks, args.block, body_n
+                {n: sides[n] for n in busy_names}, "one process", args.busy_repeats, args.ticks, args.block, tick
             )
         finally:
             neighbour.close()
         beside = _floor.machine_load()
-        reference = sides["one process"].run(args.ticks, body_n) / args.ticks
+        reference = sides["one process"].run(args.ticks, tick) / args.ticks
     finally:
         for side in sides.values():
             side.close()

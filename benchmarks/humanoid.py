@@ -164,13 +164,19 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
             assert over_bus == in_process, (over_bus, in_process)  # the same trial over processes, bit for bit
         whole_trial(standing_body)
         core = pairs["c"].placement.of("body")  # the one-process trials run on the pair's core
-        for _ in range(repeats):  # interleaved, so that all see the same machine load
-            with Pinned(core):
-                times.setdefault("a", []).append(physics_only(physics_body))
-                times.setdefault("a1", []).append(whole_trial(standing_body)[0])
-                times.setdefault("b", []).append(whole_trial(cpg_body)[0])
-            for name, pair in pairs.items():
-                times.setdefault(name, []).append(pair.trial()[0])
+        order, shuffle = ["a", "a1", "b", *pairs], np.random.default_rng(0).shuffle
+        for _ in range(repeats):  # interleaved in a shuffled order, so that all see the same machine load
+            shuffle(order)
+            for name in order:
+                if name in pairs:
+                    t = pairs[name].trial()[0]
+                else:
+                    with Pinned(core):
+                        if name == "a":
+                            t = physics_only(physics_body)
+                        else:
+                            t = whole_trial(standing_body if name == "a1" else cpg_body)[0]
+                times.setdefault(name, []).append(t)
         during = machine_load()
     finally:
         for pair in pairs.values():

@@ -4,7 +4,8 @@
                                 [--pin auto|always|never] [--no-sweep]
 
 Every figure below is a median over ``--repeats`` rounds in which every variant runs once, one after
-the other (interleaved, so that all see the same machine load); the load average is printed.
+the other in a shuffled order (interleaved, so that all see the same machine load); the load average
+is printed.
 
 (a) physics only, fixed open-loop command; (b) reflexive controller and body in one process; both on
     the core (c) places its pair on, so that both meet the same neighbours on a busy machine;
@@ -17,12 +18,12 @@ the other (interleaved, so that all see the same machine load); the load average
 (c-free) the same pair not pinned (``pin_cpus: never``), the body polling up to ``--spin-us`` for
     each command (``lockstep.spin_us``): the placement before issue 24;
 (c-mesh) the pair placed as (c), but its frames and commands on the run's mesh;
-then the floors of a lockstep pair doing the same work per tick as (b) (the body's share: (a) per
-tick; the controller's: (b) - (a), in CPU time), as calibrated interpreter loops (``_floor.py``):
-    one process (on the pair's core); a pipe, both on the pair's core; shared memory, both spinning, not pinned; bare
-    Zenoh on the lockstep link's configuration, both on the pair's core: the framework's baseline;
-then (b), (c), the one-process floor, bare Zenoh and the spinning pair again beside one busy process
-(a process this benchmark starts, spinning, unpinned);
+then the floors of a lockstep pair whose body steps (a)'s physics each tick and whose controller answers at
+once (``_floor.py``), against (a): a pipe, both on the pair's core; shared memory, both spinning, not pinned;
+bare Zenoh on the lockstep link's configuration, both on the pair's core: the framework's baseline
+(framework / bare Zenoh = ((c)/(b)) / (bare Zenoh/(a)));
+then (a), (b), (c), bare Zenoh and the spinning pair again beside one busy process (a process this
+benchmark starts, spinning, unpinned);
 then a sweep of a grid x grid subset of the E3.1 grid with 1 and with 2 body workers, with the
 controllers colocated in the body workers and as separate processes (``--no-sweep``: skipped).
 """
@@ -30,6 +31,7 @@ controllers colocated in the body workers and as separate processes (``--no-swee
 from __future__ import annotations
 
 import argparse
+import functools
 import shutil
 import sys
 import tempfile
@@ -63,23 +65,29 @@ BODY = "sfl_brain.bodies.planar_biped:PlanarBiped"
 CONTROLLER = "sfl_brain.modules.controllers.reflex:ReflexController"
 
 
-def physics_only(clock=time.perf_counter) -> float:
+def physics_tick():
+    """One control tick of the walker's physics with a fixed open-loop command, on a freshly started trial:
+    (a)'s work, and the body's work of every floor."""
     body = PlanarBiped()
     body.logging = False
     body.start_trial(REQUEST)
-    command = np.array([1.0, -1.0, 0.5, 0.5])
-    t = clock()
+    return functools.partial(body.actuate, np.array([1.0, -1.0, 0.5, 0.5]))
+
+
+def physics_only() -> float:
+    tick = physics_tick()
+    t = time.perf_counter()
     for _ in range(TICKS):
-        body.actuate(command)
-    return clock() - t
+        tick()
+    return time.perf_counter() - t
 
 
-def one_process(body_class=PlanarBiped, clock=time.perf_counter) -> tuple[float, dict]:
+def one_process(body_class=PlanarBiped) -> tuple[float, dict]:
     body = body_class()
     body.link = InProcessLink(ReflexController())
-    t = clock()
+    t = time.perf_counter()
     result = body.handle(REQUEST)
-    elapsed = clock() - t
+    elapsed = time.perf_counter() - t
     assert result.metrics["time"] >= 9.99, result
     return elapsed, {"success": result.success, "quality": result.quality, **result.metrics}
 
@@ -149,18 +157,13 @@ def main() -> None:
         hosted["c-mesh"] = Processes(session, endpoint, "benchplanarmesh", folder, pin=args.pin, link="mesh", spin=spin)
         for pair in hosted.values():
             pair.trial()  # warm up
-        # the floors do (b)'s work per tick: the body's share (a) and the controller's (b) - (a), in CPU time
-        # (a loaded machine's wall time would count the neighbours' time slices as work)
-        a0 = min(physics_only(time.thread_time) for _ in range(3))
-        b0_ = min(one_process(clock=time.thread_time)[0] for _ in range(3))
-        body_n = _floor.calibrate(a0 / TICKS * 1e6)
-        controller_n = _floor.calibrate(max(b0_ - a0, 0.0) / TICKS * 1e6)
+        # the floors: the body steps the walker's physics each tick, as (a), and the controller answers at once
         core = hosted["c"].placement.of("body")  # the pair's core (None: not pinned)
-        floors["pipe"] = _floor.Pair("pipe", controller_n, core, core, Path(folder))
-        floors["shm"] = _floor.Pair("shm", controller_n, None, None, Path(folder))
-        floors["zenoh"] = _floor.Pair("zenoh-tick", controller_n, core, core, Path(folder))
+        floors["pipe"] = _floor.Pair("pipe", 0, core, core, Path(folder))
+        floors["shm"] = _floor.Pair("shm", 0, None, None, Path(folder))
+        floors["zenoh"] = _floor.Pair("zenoh-tick", 0, core, core, Path(folder))
         for pair in floors.values():
-            pair.run(100, body_n)  # warm up
+            pair.run(100, physics_tick())  # warm up
 
         def round_(into: dict[str, list[float]], names: list[str]) -> None:
             for name in names:
@@ -175,25 +178,26 @@ def main() -> None:
                             t0, before = one_process(PlanarBipedBefore)
                         assert metrics == before, (metrics, before)  # the same trial, bit for bit
                         into.setdefault("b0", []).append(t0)
-                elif name == "floor":
-                    with Pinned(core):
-                        t = _floor.one_process(TICKS, body_n, controller_n)
                 elif name in hosted:
                     t = hosted[name].trial()
                 elif name in floors:
-                    t = floors[name].run(TICKS, body_n)
+                    t = floors[name].run(TICKS, physics_tick())
                 else:
                     continue
                 into.setdefault(name, []).append(t)
 
-        everything = ["a", "b", "b0", "c", "c-free", "c-mesh", "floor", "pipe", "shm", "zenoh"]
-        for _ in range(args.repeats):  # interleaved, so that all see the same machine load
+        everything = ["a", "b", "b0", "c", "c-free", "c-mesh", "pipe", "shm", "zenoh"]
+        shuffle = np.random.default_rng(0).shuffle
+        for _ in range(args.repeats):  # interleaved, so that all see the same machine load, in a shuffled order
+            shuffle(everything)
             round_(runs, everything)
         during = _floor.machine_load()
         neighbour = _floor.Busy()
         try:
+            besides = ["a", "b", "c", "zenoh", "shm"]
             for _ in range(args.busy_repeats):
-                round_(busy, ["b", "c", "floor", "zenoh", "shm"])
+                shuffle(besides)
+                round_(busy, besides)
         finally:
             neighbour.close()
         beside = _floor.machine_load()
@@ -214,11 +218,8 @@ def main() -> None:
     print(f"  (c)/(b) = {c / b:.2f} (goal <= 1.45)")
     print(f"  (c-free) not pinned, the body polling {args.spin_us:g} us: (c-free)/(b) = {m['c-free'] / b:.2f}")
     print(f"  (c-mesh) placed as (c), ticks on the mesh: (c-mesh)/(b) = {m['c-mesh'] / b:.2f}")
-    floor = m["floor"]
-    print(
-        f"  floors, the same work per tick ({a / TICKS * 1e6:.0f} us body, {max(b - a, 0) / TICKS * 1e6:.0f} us "
-        f"controller), against one process ({floor * 1e3:.1f} ms):"
-    )
+    floor = a
+    print("  floors: the body steps (a)'s physics each tick, the controller answers at once; against (a):")
     where = f"core {core[0]}" if core else "not pinned"
     print(f"    pipe, both blocking, both on {where}: {m['pipe'] / floor:.2f}")
     print(f"    shared memory, both spinning, not pinned: {m['shm'] / floor:.2f}")
@@ -228,8 +229,8 @@ def main() -> None:
     mb = {name: median(v) for name, v in busy.items()}
     print(f"beside one busy process, median of {args.busy_repeats} ({beside}):")
     print(f"  (c)/(b) = {mb['c'] / mb['b']:.2f} (goal <= 1.6)")
-    print(f"    shared memory, both spinning, not pinned: {mb['shm'] / mb['floor']:.2f}")
-    print(f"    bare Zenoh, lockstep link, both blocking on {where}: {mb['zenoh'] / mb['floor']:.2f}")
+    print(f"    shared memory, both spinning, not pinned: {mb['shm'] / mb['a']:.2f}")
+    print(f"    bare Zenoh, lockstep link, both blocking on {where}: {mb['zenoh'] / mb['a']:.2f}")
     print(f"500 walking trials at (c): <= {500 * c:.0f} s (goal: E3.2 under 240 s; falls end trials early)")
     if args.no_sweep:
         return
