@@ -1,9 +1,10 @@
 """Wall time of one 10-s trial of the NAO-sized humanoid walking on its CPG, in one process and over processes.
 
-    python benchmarks/humanoid.py [--repeats 5] [--spin-us 400] [--pin auto|always|never] [--quick]
+    python benchmarks/humanoid.py [--repeats 9] [--spin-us 400] [--pin auto|always|never] [--quick]
 
 Each item is one trial of 10 s of simulated time (1000 control ticks of 10 ms, 4000 PyBullet steps at 400 Hz),
-interleaved so that all see the same machine load; medians over ``--repeats``; the load average is printed:
+interleaved in a shuffled order so that all see the same machine load, ``--repeats`` rounds; times are medians over
+the rounds, ratios medians of the ratios within each round; the load average is printed:
 
 (a) physics only: the body built for the trial, then ``actuate`` with the standing command 1000 times (no sensing, no
     controller, no messages), as ``benchmarks/planar.py`` (a) steps the planar biped;
@@ -127,7 +128,7 @@ class Processes(HostedPair):
 
 def main(argv: list[str] | None = None) -> dict[str, float]:
     parser = argparse.ArgumentParser()
-    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--repeats", type=int, default=9, help="rounds")
     parser.add_argument(
         "--spin-us", type=float, default=SCENARIO_SPIN_US, help="lockstep.spin_us (default: the humanoid scenario's)"
     )
@@ -187,23 +188,29 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
             body.close()
     m = {name: float(np.median(v)) for name, v in times.items()}
     a, a1, b, c = m["a"], m["a1"], m["b"], m["c"]
+
+    def ratio(x: str, y: str) -> float:
+        """The median over rounds of x / y in the same round (paired: a slow drift of the load cancels)."""
+        return float(np.median(np.array(times[x]) / np.array(times[y])))
+
     print(
-        f"humanoid: one {SECONDS:g}-s trial (1000 control ticks, 4000 physics steps), median of {repeats}, interleaved"
+        f"humanoid: one {SECONDS:g}-s trial (1000 control ticks, 4000 physics steps), {repeats} rounds, interleaved; "
+        "times: medians; ratios: medians of the ratios within a round"
     )
     print(f"  (c) placed by lockstep.pin_cpus {args.pin}: {pairs_where(args.pin)}; during: {during}")
     print(f"  (a)  physics only, standing command      {a * 1e3:7.1f} ms  ({SECONDS / a:5.1f}x real time)")
     print(f"  (a') body trial, constant controller     {a1 * 1e3:7.1f} ms  ({SECONDS / a1:5.1f}x real time)")
     print(f"  (b)  CPG + body, one process             {b * 1e3:7.1f} ms  ({SECONDS / b:5.1f}x real time; goal >= 20x)")
     print(f"  (c)  CPG + body over processes           {c * 1e3:7.1f} ms  ({SECONDS / c:5.1f}x real time; goal >= 20x)")
-    print(f"  (b)/(c) = {b / c:.2f} of the one-process speed over processes (goal >= 0.8)")
-    print(f"  (b)/(a) = {b / a:.2f}   (c)/(b) = {c / b:.2f}   (c)/(a) = {c / a:.2f}")
+    print(f"  (b)/(c) = {ratio('b', 'c'):.2f} of the one-process speed over processes (goal >= 0.8)")
+    print(f"  (b)/(a) = {ratio('b', 'a'):.2f}   (c)/(b) = {ratio('c', 'b'):.2f}   (c)/(a) = {ratio('c', 'a'):.2f}")
     for name, label in (
         ("c-free", f"not pinned, the body polling {args.spin_us:g} us, lockstep link"),
         ("c-mesh", "placed as (c), ticks on the mesh"),
         ("c-before", f"not pinned, the body polling {args.spin_us:g} us, ticks on the mesh (before issue 24)"),
     ):
         if name in m:
-            print(f"  ({name}) {label}: {m[name] * 1e3:.1f} ms, ({name})/(b) = {m[name] / b:.2f}")
+            print(f"  ({name}) {label}: {m[name] * 1e3:.1f} ms, ({name})/(b) = {ratio(name, 'b'):.2f}")
     print(
         f"  beyond the physics: sensing + framework (a')-(a) = {(a1 - a) * 1e3:.1f} ms, CPG (b)-(a') = "
         f"{(b - a1) * 1e3:.1f} ms, bus (c)-(b) = {(c - b) * 1e3:.1f} ms; CPG + bus (c)-(a) = {(c - a) * 1e3:.1f} ms "

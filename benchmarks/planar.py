@@ -1,11 +1,11 @@
 """Wall time of one 10-s trial of the planar walker, in one process and over processes, beside its floors.
 
-    python benchmarks/planar.py [--repeats 9] [--busy-repeats 7] [--grid 15] [--spin-us 200]
+    python benchmarks/planar.py [--repeats 21] [--busy-repeats 15] [--grid 15] [--spin-us 200]
                                 [--pin auto|always|never] [--no-sweep]
 
-Every figure below is a median over ``--repeats`` rounds in which every variant runs once, one after
-the other in a shuffled order (interleaved, so that all see the same machine load); the load average
-is printed.
+Every variant runs once per round, one after the other in a shuffled order (interleaved, so that all
+see the same machine load), for ``--repeats`` rounds; a time is a median over the rounds, a ratio the
+median of the ratios within each round. The load average is printed.
 
 (a) physics only, fixed open-loop command; (b) reflexive controller and body in one process; both on
     the core (c) places its pair on, so that both meet the same neighbours on a busy machine;
@@ -135,8 +135,8 @@ def median(samples) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser()
-    parser.add_argument("--repeats", type=int, default=9)
-    parser.add_argument("--busy-repeats", type=int, default=7, help="rounds beside one busy process")
+    parser.add_argument("--repeats", type=int, default=21, help="rounds")
+    parser.add_argument("--busy-repeats", type=int, default=15, help="rounds beside one busy process")
     parser.add_argument("--grid", type=int, default=15)
     parser.add_argument("--spin-us", type=float, default=200.0, help="lockstep.spin_us")
     parser.add_argument("--pin", choices=["auto", "always", "never"], default="auto", help="lockstep.pin_cpus of (c)")
@@ -208,29 +208,35 @@ def main() -> None:
         shutil.rmtree(folder, ignore_errors=True)
     m = {name: median(v) for name, v in runs.items()}
     a, b, b0, c = m["a"], m["b"], m["b0"], m["c"]
-    print(f"one 10-s trial ({TICKS} control ticks, 10 000 physics steps), median of {args.repeats}, interleaved")
+
+    def ratio(x: str, y: str, of=runs) -> float:
+        """The median over rounds of x / y in the same round (paired: a slow drift of the load cancels)."""
+        return median(np.array(of[x]) / np.array(of[y]))
+
+    print(
+        f"one 10-s trial ({TICKS} control ticks, 10 000 physics steps), {args.repeats} rounds, interleaved; "
+        "times: medians; ratios: medians of the ratios within a round"
+    )
     print(f"  (c) placed by lockstep.pin_cpus {args.pin}: {hosted['c'].where()}; during: {during}")
     print(f"  (a) physics only, open loop         {a * 1e3:7.1f} ms  ({10 / a:5.1f}x real time)")
     print(f"  (b) controller + body, one process  {b * 1e3:7.1f} ms  ({10 / b:5.1f}x real time)")
     print(f"  (b0) the same, the body as before batching  {b0 * 1e3:7.1f} ms  (identical metrics)")
-    print(f"  (b0)/(b) = {b0 / b:.2f} (goal >= 1.6)   (b)/(a) = {b / a:.2f} (goal <= 1.1)")
+    print(f"  (b0)/(b) = {ratio('b0', 'b'):.2f} (goal >= 1.6)   (b)/(a) = {ratio('b', 'a'):.2f} (goal <= 1.1)")
     print(f"  (c) controller + body over processes, lockstep link  {c * 1e3:7.1f} ms  ({10 / c:5.1f}x real time)")
-    print(f"  (c)/(b) = {c / b:.2f} (goal <= 1.45)")
-    print(f"  (c-free) not pinned, the body polling {args.spin_us:g} us: (c-free)/(b) = {m['c-free'] / b:.2f}")
-    print(f"  (c-mesh) placed as (c), ticks on the mesh: (c-mesh)/(b) = {m['c-mesh'] / b:.2f}")
-    floor = a
+    print(f"  (c)/(b) = {ratio('c', 'b'):.2f} (goal <= 1.45)")
+    print(f"  (c-free) not pinned, the body polling {args.spin_us:g} us: (c-free)/(b) = {ratio('c-free', 'b'):.2f}")
+    print(f"  (c-mesh) placed as (c), ticks on the mesh: (c-mesh)/(b) = {ratio('c-mesh', 'b'):.2f}")
     print("  floors: the body steps (a)'s physics each tick, the controller answers at once; against (a):")
     where = f"core {core[0]}" if core else "not pinned"
-    print(f"    pipe, both blocking, both on {where}: {m['pipe'] / floor:.2f}")
-    print(f"    shared memory, both spinning, not pinned: {m['shm'] / floor:.2f}")
-    print(f"    bare Zenoh, lockstep link, both blocking on {where}: {m['zenoh'] / floor:.2f}")
-    framework_over_raw = (c / b) / (m["zenoh"] / floor)
+    print(f"    pipe, both blocking, both on {where}: {ratio('pipe', 'a'):.2f}")
+    print(f"    shared memory, both spinning, not pinned: {ratio('shm', 'a'):.2f}")
+    print(f"    bare Zenoh, lockstep link, both blocking on {where}: {ratio('zenoh', 'a'):.2f}")
+    framework_over_raw = ratio("c", "b") / ratio("zenoh", "a")
     print(f"  framework / bare Zenoh in the same configuration: {framework_over_raw:.2f} (goal <= 1.10)")
-    mb = {name: median(v) for name, v in busy.items()}
-    print(f"beside one busy process, median of {args.busy_repeats} ({beside}):")
-    print(f"  (c)/(b) = {mb['c'] / mb['b']:.2f} (goal <= 1.6)")
-    print(f"    shared memory, both spinning, not pinned: {mb['shm'] / mb['a']:.2f}")
-    print(f"    bare Zenoh, lockstep link, both blocking on {where}: {mb['zenoh'] / mb['a']:.2f}")
+    print(f"beside one busy process, {args.busy_repeats} rounds ({beside}):")
+    print(f"  (c)/(b) = {ratio('c', 'b', busy):.2f} (goal <= 1.6)")
+    print(f"    shared memory, both spinning, not pinned: {ratio('shm', 'a', busy):.2f}")
+    print(f"    bare Zenoh, lockstep link, both blocking on {where}: {ratio('zenoh', 'a', busy):.2f}")
     print(f"500 walking trials at (c): <= {500 * c:.0f} s (goal: E3.2 under 240 s; falls end trials early)")
     if args.no_sweep:
         return
