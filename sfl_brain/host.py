@@ -11,10 +11,10 @@ handles on ``sfl/<run>/<instance>/<tag>``, publishes replies to stream messages
 token once it is ready. A body worker and its controller process also open their
 lockstep link (``spec["tick"]``, :func:`bus.open_tick_session`), which carries their
 frames and commands; a host whose spec names cores (``spec["cpus"]``, from
-:mod:`sfl_brain.placement`) pins itself to them before any session starts. Requests are handed to one loop in the main thread (a
-trial may run for seconds); lockstep stream messages are answered by a thread
-that blocks in the subscriber's channel. A lock makes sure the module never sees
-two messages at once.
+:mod:`sfl_brain.placement`) pins itself to them before any session starts.
+Requests are handed to one loop in the main thread (a trial may run for seconds);
+lockstep stream messages are answered by a thread that blocks in the subscriber's
+channel. A lock makes sure the module never sees two messages at once.
 
 A malformed, unsigned, stale or foreign message is dropped and counted by reason (a request
 gets an error reply); each kind is logged once. At exit the counts go to

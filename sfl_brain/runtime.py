@@ -57,6 +57,9 @@ log = logging.getLogger("sfl.runtime")
 #: the instance name of the supervisor's own liveliness token
 RUN_TOKEN = "@run"
 
+#: the longest path of a Unix socket, with its final NUL (Linux 108, macOS 104: the shorter)
+UNIX_PATH_MAX = 104
+
 #: exception types a module host names in an error reply that mean "cut short, send it again"
 RETRYABLE = frozenset({LinkError.__name__})
 
@@ -249,15 +252,20 @@ class Supervisor:
         every process runs: ``logs/placement.json`` and one line on the terminal."""
         pairs, _ = lockstep_pairs(self.plan)
         pairs = [p for p in pairs if p.controller is not None]
+        links = "the mesh (no Unix sockets here)"
         if pairs and hasattr(socket, "AF_UNIX"):
             self.tick_folder = tempfile.mkdtemp(prefix="sfl-")  # 0700: only this user may connect
-            for i, pair in enumerate(pairs):
-                endpoint = bus.tick_endpoint(self.tick_folder, str(i))
-                self.ticks[pair.controller] = {"listen": [endpoint]}
-                self.ticks[pair.body] = {"connect": [endpoint]}
-        placed = self.placement.to_json() | {"lockstep_links": {name: t for name, t in self.ticks.items()}}
+            if len(os.fsencode(self.tick_folder)) + len(f"/{len(pairs)}.sock") < UNIX_PATH_MAX:
+                for i, pair in enumerate(pairs):
+                    endpoint = bus.tick_endpoint(self.tick_folder, str(i))
+                    self.ticks[pair.controller] = {"listen": [endpoint]}
+                    self.ticks[pair.body] = {"connect": [endpoint]}
+                links = f"lockstep links in {self.tick_folder}"
+            else:
+                links = f"the mesh (the temporary folder {self.tick_folder} is too long a path for a Unix socket)"
+        placed = self.placement.to_json() | {"lockstep_links": self.ticks, "ticks_on": links}
         (self.run_dir / "logs" / "placement.json").write_text(json.dumps(placed, indent=1) + "\n")
-        log.info("%s", self.placement.describe())
+        log.info("%s; ticks on %s", self.placement.describe(), links)
         if pairs:
             print(f"sfl: {self.placement.describe()}", flush=True)
 
