@@ -5,9 +5,11 @@ controller waits for the next frame, then the controller computes while the body
 command. So the pair loses nothing by sharing a core, and it gains the cost of every hand-over:
 on a 2-core VM an idle core halts, and waking a thread on the other core costs about 40 us, paid
 two or more times per tick (frame in, command back), where a switch between two processes on one
-core costs about 3 us. Measured side by side (``benchmarks/bus.py``, 1000 ticks of 90 us of work,
-two processes blocking on a pipe): 1.92x the one-process time on two cores, 1.01x on one core.
-Both ends block on a shared core; neither polls (a poll would starve the other).
+core costs about 3 us. Measured side by side (``benchmarks/bus.py``, ticks of 90 us of work, two
+processes blocking on a pipe): 1.9-2.1x the one-process time on two cores, 1.03-1.04x on one core;
+the framework over Zenoh 1.7-2.3x on one core against 2.9-3.5x placed as before (not pinned, the
+body polling), ``docs/results/benchmarks.md``. Both ends block on a shared core; neither polls (a
+poll would starve the other).
 
 :func:`place` decides, from the run's lockstep pairs, its other module processes, the cores
 ``sfl run`` may use (``taskset`` and container limits respected) and ``lockstep.pin_cpus``:
