@@ -253,7 +253,7 @@ class Supervisor:
         pairs, _ = lockstep_pairs(self.plan)
         pairs = [p for p in pairs if p.controller is not None]
         links = "the mesh (no Unix sockets here)"
-        if pairs and hasattr(socket, "AF_UNIX"):
+        if pairs and hasattr(socket, "AF_UNIX") and os.name != "nt":  # Zenoh has no unixsock-stream on Windows
             self.tick_folder = tempfile.mkdtemp(prefix="sfl-")  # 0700: only this user may connect
             if len(os.fsencode(self.tick_folder)) + len(f"/{len(pairs)}.sock") < UNIX_PATH_MAX:
                 for i, pair in enumerate(pairs):
