@@ -54,9 +54,9 @@ def controller_spec(run_id: str, reference: str, endpoint: str, cpus: list[int] 
 class HostedPair:
     """A body and its controller, each hosted by ``sfl_brain.host`` in a process of its own, as ``sfl run``
     hosts a body worker and its controller process: placed as ``lockstep.pin_cpus`` ``pin`` places them
-    (``cores``: instance -> cores), their frames and commands on a lockstep link of their own
-    (``link`` "tick") or on the mesh (``link`` "mesh"). ``body`` None: only the controller is hosted,
-    and the caller is the body (``tick``: the link's endpoint to connect to)."""
+    (or ``apart``: a core each, as ``pin_cpus: always`` did before issue 24), their frames and commands
+    on a lockstep link of their own (``link`` "tick") or on the mesh (``link`` "mesh"). ``body`` None:
+    only the controller is hosted, and the caller is the body (``tick``: the link's endpoint)."""
 
     def __init__(
         self,
@@ -75,9 +75,14 @@ class HostedPair:
     ) -> None:
         from sfl_brain import bus
         from sfl_brain.messages import SensorFrame
-        from sfl_brain.placement import Pair, place, usable_cpus
+        from sfl_brain.placement import Pair, Placement, place, usable_cpus
 
-        self.placement = place([Pair("body", "controller")], [], usable_cpus(), pin)
+        if pin == "apart":  # a core each, as lockstep.pin_cpus always placed a pair before issue 24
+            cpus = usable_cpus()
+            cores = {"body": (cpus[0],), "controller": (cpus[-1],)} if len(cpus) > 1 else {}
+            self.placement = Placement("apart", tuple(cpus), cores, "body and controller on a core each")
+        else:
+            self.placement = place([Pair("body", "controller")], [], usable_cpus(), pin)
         self.tick = bus.tick_endpoint(folder, run_id) if link == "tick" else None
         spec = controller_spec(run_id, controller, endpoint, self.placement.of("controller"))
         spec.update(params=controller_params or {}, tick={"listen": [self.tick]} if self.tick else None)

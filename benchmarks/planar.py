@@ -18,6 +18,8 @@ median of the ratios within each round. The load average is printed.
 (c-free) the same pair not pinned (``pin_cpus: never``), the body polling up to ``--spin-us`` for
     each command (``lockstep.spin_us``): the placement before issue 24;
 (c-mesh) the pair placed as (c), but its frames and commands on the run's mesh;
+(c-apart) the pair on a core each (as ``pin_cpus: always`` placed it before issue 24), the body
+    polling, on its lockstep link;
 then the floors of a lockstep pair whose body steps (a)'s physics each tick and whose controller answers at
 once (``_floor.py``), against (a): a pipe, both on the pair's core; shared memory, both spinning, not pinned;
 bare Zenoh on the lockstep link's configuration, both on the pair's core: the framework's baseline
@@ -155,6 +157,7 @@ def main() -> None:
         hosted["c"] = Processes(session, endpoint, "benchplanar", folder, pin=args.pin, spin=spin)
         hosted["c-free"] = Processes(session, endpoint, "benchplanarfree", folder, pin="never", spin=spin)
         hosted["c-mesh"] = Processes(session, endpoint, "benchplanarmesh", folder, pin=args.pin, link="mesh", spin=spin)
+        hosted["c-apart"] = Processes(session, endpoint, "benchplanarapart", folder, pin="apart", spin=spin)
         for pair in hosted.values():
             pair.trial()  # warm up
         # the floors: the body steps the walker's physics each tick, as (a), and the controller answers at once
@@ -186,7 +189,7 @@ def main() -> None:
                     continue
                 into.setdefault(name, []).append(t)
 
-        everything = ["a", "b", "b0", "c", "c-free", "c-mesh", "pipe", "shm", "zenoh"]
+        everything = ["a", "b", "b0", "c", "c-free", "c-mesh", "c-apart", "pipe", "shm", "zenoh"]
         shuffle = np.random.default_rng(0).shuffle
         for _ in range(args.repeats):  # interleaved, so that all see the same machine load, in a shuffled order
             shuffle(everything)
@@ -226,6 +229,10 @@ def main() -> None:
     print(f"  (c)/(b) = {ratio('c', 'b'):.2f} (goal <= 1.45)")
     print(f"  (c-free) not pinned, the body polling {args.spin_us:g} us: (c-free)/(b) = {ratio('c-free', 'b'):.2f}")
     print(f"  (c-mesh) placed as (c), ticks on the mesh: (c-mesh)/(b) = {ratio('c-mesh', 'b'):.2f}")
+    print(
+        f"  (c-apart) a core each, the body polling {args.spin_us:g} us, lockstep link: "
+        f"(c-apart)/(b) = {ratio('c-apart', 'b'):.2f}"
+    )
     print("  floors: the body steps (a)'s physics each tick, the controller answers at once; against (a):")
     where = f"core {core[0]}" if core else "not pinned"
     print(f"    pipe, both blocking, both on {where}: {ratio('pipe', 'a'):.2f}")

@@ -46,7 +46,7 @@ def test_planar_benchmark_prints_the_trial_ratios_beside_the_floors_and_the_swee
     assert "load average" in out
     figures(out, r"\(c\)/\(b\) = ([\d.]+)", count=2)  # alone, and beside one busy process
     figures(out, r"\(b0\)/\(b\) = ([\d.]+)")  # the body before batching, measured beside it
-    figures(out, r"\((?:c-free|c-mesh)\)/\(b\) = ([\d.]+)", count=2)
+    figures(out, r"\((?:c-free|c-mesh|c-apart)\)/\(b\) = ([\d.]+)", count=3)
     # the floors, the last two also beside one busy process
     figures(out, r"    pipe, both blocking, [^:\n]*: ([\d.]+)")
     figures(out, r"    shared memory, both spinning[^:\n]*: ([\d.]+)", count=2)
