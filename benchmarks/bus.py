@@ -1,303 +1,263 @@
-"""Lockstep round trip per control tick: raw Zenoh vs the framework's body<->controller link vs one process.
+"""Lockstep ticks between a body and its controller in two processes, beside their physical floors.
 
-    python benchmarks/bus.py [--ticks 10000] [--blocks 20] [--spin-us 200] [--pin never|auto|always]
+    python benchmarks/bus.py [--ticks 1000] [--repeats 9] [--busy-repeats 7] [--block 50]
+                             [--work-us 90] [--spin-us 200] [--no-startup]
 
-The pings and pongs are placed as ``sfl run`` places a body worker and its controller process
-under ``pin_cpus`` ``--pin`` (default ``never``, as a scenario; see ``sfl_brain.placement``).
+A tick: the body does ``--work-us`` of computation (its physics: a calibrated interpreter loop,
+``_floor.py``), sends a sensor frame (240 bytes) and waits for the motor command (96 bytes). Every
+variant runs ``--ticks`` ticks per round, in blocks of ``--block`` ticks taken in turn with every
+other variant (interleaved finely, so that all see the same machine load); each figure is the
+median over ``--repeats`` rounds of the variant's time over the one-process time of the same round.
 
-(raw) a bare Zenoh pub/sub ping-pong between two processes (100-byte payload), both sides
-    blocking in a ring channel's recv();
-(raw, polling) the same, but the ping polls try_recv() for up to --spin-us before it blocks, as
-    a body does (``lockstep.spin_us``); the faster of the two raw patterns is the goal's baseline;
-(example) the same ping-pong as zenoh-python's own z_ping.py / z_pong.py examples (the pong
-    answers in a subscriber callback, the ping waits on the default FIFO channel), the usual
-    pattern of a "raw Zenoh Python round trip", shown for reference;
-(typed) the polling raw pattern carrying the framework's typed messages, written by hand: the
-    pong decodes the SensorFrame, calls the open-loop controller's handler and encodes its
-    MotorCommand; the ping encodes and decodes. No host, no BusLink: this splits the framework's
-    cost into the typed codec and dispatch, and the runtime around them;
-(framework) the body's BusLink to a controller hosted by ``sfl_brain.host`` in another process:
-    a SensorFrame out, a MotorCommand back, typed, encoded, dispatched (the open-loop controller),
-    waiting as a body does (``SpinThenSleep`` with --spin-us);
-    raw and framework run in interleaved blocks so that both see the same machine load;
-(one process) the same exchange through InProcessLink.
-It also times ``sfl run`` start-up (five module processes) to the first trial.
+(one process) the work, then the open-loop controller through ``InProcessLink``, on the core a pair gets;
+(pipe) an OS pipe each way, both blocking: on two cores, and both on one core;
+(shared memory) both spinning on a sequence number, not pinned;
+(bare Zenoh) pub/sub, both blocking in a ring channel's recv(): on the run's mesh configuration
+    (TCP) on two cores and on one core, and on the lockstep link's configuration (lowlatency
+    transport, QoS off, a Unix socket; ``bus.tick_config``) on one core;
+(typed by hand) bare Zenoh on the lockstep link with the framework's codec and the open-loop controller
+    written by hand (no host, no BusLink, no checks): what the messages cost, apart from the runtime;
+(framework) the body's ``BusLink`` to an open-loop controller hosted by ``sfl_brain.host``, typed,
+    encoded, checked, dispatched: as ``sfl run`` runs a pair now (both on one core, blocking, on
+    their lockstep link), and as before issue 24 (not pinned, ticks on the mesh, the body polling up
+    to ``--spin-us`` before it sleeps);
+then one process, the framework, bare Zenoh on the link and the spinning pair again beside one busy
+process (a spinning process this benchmark starts, unpinned). Every session runs Zenoh's runtimes
+on one thread (``bus.RUNTIME``). Then the ``sfl run`` start-up (five module processes) to the first
+trial (``--no-startup``: skipped).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import subprocess
+import functools
+import shutil
 import sys
-import textwrap
+import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-import zenoh
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import controller_spec, spawn_host, stats, wait_alive  # noqa: E402
+import _floor  # noqa: E402
+from _common import HostedPair  # noqa: E402
 
 from sfl_brain import bus  # noqa: E402
 from sfl_brain.body import InProcessLink  # noqa: E402
 from sfl_brain.host import BusLink  # noqa: E402
-from sfl_brain.messages import ControllerReset, SensorFrame, decode, encode  # noqa: E402
+from sfl_brain.messages import ControllerReset, SensorFrame  # noqa: E402
 from sfl_brain.modules.controllers.open_loop import OpenLoopController  # noqa: E402
-from sfl_brain.placement import assign, pin, usable_cpus  # noqa: E402
+from sfl_brain.placement import pin, usable_cpus  # noqa: E402
 
-# every pong: placed (argv[2], JSON cores or null), then a session that connects to the ping (argv[1])
-PREAMBLE = textwrap.dedent("""
-    import json, sys, threading, zenoh
-    sys.path.insert(0, {root!r})
-    from sfl_brain import bus
-    from sfl_brain.placement import pin
-    pin(json.loads(sys.argv[2]))
-    s = bus.open_session(["tcp/127.0.0.1:0"], [sys.argv[1]])
-""")
-PONG = textwrap.dedent("""
-    sub = s.declare_subscriber("{prefix}/ping", zenoh.handlers.RingChannel(64))
-    pub = s.declare_publisher("{prefix}/pong")
-    tok = s.liveliness().declare_token("{prefix}/pong")
-    while True:
-        smp = sub.recv()
-        if smp.payload.to_bytes() == b"stop": break
-        pub.put(smp.payload)
-    s.close()
-""")
-# zenoh-python's examples/z_pong.py, on its own keys
-PONG_EXAMPLE = textwrap.dedent("""
-    done = threading.Event()
-    pub = s.declare_publisher("bench/ex/pong", congestion_control=zenoh.CongestionControl.BLOCK)
-    def pong(smp):
-        if smp.payload.to_bytes() == b"stop": done.set()
-        else: pub.put(smp.payload)
-    s.declare_subscriber("bench/ex/ping", pong)
-    tok = s.liveliness().declare_token("bench/ex/pong")
-    done.wait()
-    s.close()
-""")
-# (typed): the raw pong with the framework's codec and the open-loop controller, by hand
-PONG_TYPED = textwrap.dedent("""
-    from sfl_brain.messages import ControllerReset, decode, encode
-    from sfl_brain.modules.controllers.open_loop import OpenLoopController
-    controller = OpenLoopController()
-    controller.handle(ControllerReset(trial_id=0, seed=0, params={}, sensors=["s"] * 8,
-                                      commands=list(controller.WRITES)))
-    sub = s.declare_subscriber("bench/typed/ping", zenoh.handlers.RingChannel(64))
-    pub = s.declare_publisher("bench/typed/pong")
-    tok = s.liveliness().declare_token("bench/typed/pong")
-    while True:
-        data = sub.recv().payload.to_bytes()
-        if data == b"stop": break
-        pub.put(encode(controller.handle(decode(data))))
-    s.close()
-""")
 SENSORS = ["hip_l", "hip_r", "knee_l", "knee_r", "contact_l", "contact_r", "slope", "pitch"]
 COMMANDS = ["v_hip_l", "v_hip_r", "v_knee_l", "v_knee_r"]
+RESET = ControllerReset(trial_id=0, seed=0, params={}, sensors=SENSORS, commands=COMMANDS)
 
 
-class Raw:
-    """A bare ping-pong. ``raw``: both sides blocking in a ring channel's recv(); ``polling``: the
-    same, the ping polling for up to ``spin`` seconds first. ``example``: zenoh-python's
-    z_ping/z_pong (callback pong, FIFO ping). ``typed``: the polling pattern with the framework's
-    messages, codec and controller, by hand."""
+class OneProcess:
+    """The body's work, then the open-loop controller through InProcessLink, on ``cores`` (the pair's core,
+    so that both meet the same neighbours on a busy machine; None: not pinned)."""
 
-    def __init__(self, session, endpoint, kind, cpus, spin=0.0):
-        root = str(Path(__file__).resolve().parents[1])
-        prefix, script = {
-            "raw": ("bench", PONG.format(prefix="bench")),
-            "polling": ("bench/poll", PONG.format(prefix="bench/poll")),
-            "example": ("bench/ex", PONG_EXAMPLE),
-            "typed": ("bench/typed", PONG_TYPED),
-        }[kind]
-        self.spin = spin if kind in ("polling", "typed") else 0.0
-        source = PREAMBLE.format(root=root) + script
-        self.proc = subprocess.Popen([sys.executable, "-c", source, endpoint, json.dumps(cpus)])
-        wait_alive(session, f"{prefix}/pong")
-        if kind == "example":
-            self.pub = session.declare_publisher(f"{prefix}/ping", congestion_control=zenoh.CongestionControl.BLOCK)
-            self.sub = session.declare_subscriber(f"{prefix}/pong")
-        else:
-            self.pub = session.declare_publisher(f"{prefix}/ping")
-            self.sub = session.declare_subscriber(f"{prefix}/pong", zenoh.handlers.RingChannel(64))
-        self.typed = kind == "typed"
-        self.payload = b"x" * 100
+    def __init__(self, cores=None) -> None:
+        self.mine = cores
+        self.link = InProcessLink(OpenLoopController())
+        self.link.reset(RESET)
         self.values = np.zeros(len(SENSORS))
         self.tick = 0
 
-    def wait(self):
-        """Poll for up to ``spin`` seconds, then block."""
-        try_recv, clock = self.sub.try_recv, time.perf_counter
-        deadline = clock() + self.spin
-        while (sample := try_recv()) is None and clock() < deadline:
-            pass
-        return sample if sample is not None else self.sub.recv()
-
-    def block(self, ticks):
-        times = []
-        pub, recv, payload = self.pub, self.wait if self.spin else self.sub.recv, self.payload
-        for _ in range(ticks):
-            if self.typed:
-                frame = SensorFrame(trial_id=0, tick=self.tick, values=self.values)
+    def run(self, ticks: int, tick) -> float:
+        before = usable_cpus()
+        pin(self.mine)
+        try:
+            step, values = self.link.step, self.values
+            t = time.perf_counter()
+            for _ in range(ticks):
+                tick()
+                step(SensorFrame(trial_id=0, tick=self.tick, values=values))
                 self.tick += 1
-                t = time.perf_counter()
-                pub.put(encode(frame))
-                decode(recv().payload.to_bytes())
-            else:
-                t = time.perf_counter()
-                pub.put(payload)
-                recv()
-            times.append(time.perf_counter() - t)
-        return times
+            return time.perf_counter() - t
+        finally:
+            pin(before)
 
-    def close(self):
-        self.pub.put(b"stop")
-        self.proc.wait(timeout=10)
-        self.sub.undeclare()
-        self.pub.undeclare()
+    def close(self) -> None:
+        pass
 
 
 class Framework:
-    """The body's BusLink to an open-loop controller hosted by ``sfl_brain.host``."""
+    """This process as the body: ``BusLink`` to an open-loop controller hosted by ``sfl_brain.host``,
+    placed as ``lockstep.pin_cpus`` ``placement`` says, ticks on the lockstep ``link`` or the mesh."""
 
-    def __init__(self, session, endpoint, cpus, spin):
-        run_id = "benchbus"
-        reference = "sfl_brain.modules.controllers.open_loop:OpenLoopController"
-        self.proc = spawn_host(controller_spec(run_id, reference, endpoint, cpus))
-        wait_alive(session, bus.alive_key(run_id, "controller"))
-        self.link = BusLink(session, run_id, "body", "controller", 10.0, spin)
-        self.link.reset(ControllerReset(trial_id=0, seed=0, params={}, sensors=SENSORS, commands=COMMANDS))
+    def __init__(self, session, endpoint, run_id, folder, placement: str, link: str, spin: float) -> None:
+        self.pair = HostedPair(
+            session,
+            endpoint,
+            run_id,
+            "sfl_brain.modules.controllers.open_loop:OpenLoopController",
+            pin=placement,
+            link=link,
+            folder=folder,
+        )
+        self.mine = self.pair.placement.of("body")
+        self.ticks = bus.open_tick_session([], [self.pair.tick]) if self.pair.tick else None
+        # a body pinned with its controller never polls (it may use one core only)
+        self.link = BusLink(session, run_id, "body", "controller", 10.0, 0.0 if self.mine else spin, ticks=self.ticks)
+        self.link.reset(RESET)
         self.values = np.zeros(len(SENSORS))
         self.tick = 0
 
-    def block(self, ticks):
-        times = []
-        step, values = self.link.step, self.values
-        for _ in range(ticks):
-            frame = SensorFrame(trial_id=0, tick=self.tick, values=values)
-            self.tick += 1
+    def run(self, ticks: int, tick) -> float:
+        before = usable_cpus()
+        pin(self.mine)
+        try:
+            step, values = self.link.step, self.values
             t = time.perf_counter()
-            step(frame)
-            times.append(time.perf_counter() - t)
-        return times
+            for _ in range(ticks):
+                tick()
+                step(SensorFrame(trial_id=0, tick=self.tick, values=values))
+                self.tick += 1
+            return time.perf_counter() - t
+        finally:
+            pin(before)
 
-    def close(self):
+    def close(self) -> None:
         self.link.close()
-        self.proc.terminate()
-        self.proc.wait(timeout=10)
+        if self.ticks is not None:
+            self.ticks.close()
+        self.pair.close()
 
 
-def in_process_round_trips(ticks):
-    link = InProcessLink(OpenLoopController())
-    link.reset(ControllerReset(trial_id=0, seed=0, params={}, sensors=SENSORS, commands=COMMANDS))
-    values = np.zeros(len(SENSORS))
-    times = []
-    for i in range(ticks):
-        frame = SensorFrame(trial_id=0, tick=i, values=values)
-        t = time.perf_counter()
-        link.step(frame)
-        times.append(time.perf_counter() - t)
-    return times
-
-
-def startup(repeats=3):
-    import tempfile
-
+def startup(repeats: int = 5) -> dict[str, np.ndarray]:
+    """``sfl run`` to all modules alive and to the first trial done, with the pair placed (``pin_cpus: auto``)
+    and not (``never``), interleaved: (ready s, first trial s) per run."""
     from sfl_brain.run import run
     from sfl_brain.scenario import load
 
-    ready = []
     root = Path(__file__).resolve().parents[1]
+    times: dict[str, list] = {"auto": [], "never": []}
     for _ in range(repeats):
-        plan = load(root / "scenarios" / "quickstart.yaml", ["protocol.trials=1", "record.body_every=0"])
-        first = {}
-        t0 = time.perf_counter()
-        with tempfile.TemporaryDirectory() as tmp:
-            run(
-                plan,
-                Path(tmp) / "run",
-                on_ready=lambda sup, s, f=first: f.setdefault("ready", s),
-                on_progress=lambda p, f=first, t0=t0: f.setdefault("trial", time.perf_counter() - t0),
-            )
-        ready.append((first["ready"], first["trial"]))
-    return np.array(ready)
+        for mode in times:
+            sets = ["protocol.trials=1", "record.body_every=0", f"lockstep.pin_cpus={mode}"]
+            plan = load(root / "scenarios" / "quickstart.yaml", sets)
+            first = {}
+            t0 = time.perf_counter()
+            with tempfile.TemporaryDirectory() as tmp:
+                run(
+                    plan,
+                    Path(tmp) / "run",
+                    on_ready=lambda sup, s, f=first: f.setdefault("ready", s),
+                    on_progress=lambda p, f=first, t0=t0: f.setdefault("trial", time.perf_counter() - t0),
+                )
+            times[mode].append((first["ready"], first["trial"]))
+    return {mode: np.array(t) for mode, t in times.items()}
+
+
+def rounds(sides: dict, reference: str, repeats: int, ticks: int, block: int, tick) -> dict[str, list[float]]:
+    """Each side's time over the reference's, per round; the sides take blocks of ticks in turn, in a shuffled order."""
+    ratios: dict[str, list[float]] = {name: [] for name in sides}
+    order, shuffle = list(sides), np.random.default_rng(0).shuffle
+    for _ in range(repeats):
+        total = dict.fromkeys(sides, 0.0)
+        for _ in range(max(ticks // block, 1)):
+            shuffle(order)  # no variant always runs right after the same other one
+            for name in order:
+                total[name] += sides[name].run(block, tick)
+        for name in sides:
+            ratios[name].append(total[name] / total[reference])
+    return ratios
 
 
 def main() -> None:
     parser = argparse.ArgumentParser()
-    parser.add_argument("--ticks", type=int, default=10000)
-    parser.add_argument("--blocks", type=int, default=20)
-    parser.add_argument("--spin-us", type=float, default=200.0, help="lockstep.spin_us")
-    parser.add_argument("--pin", choices=["never", "auto", "always"], default="never", help="lockstep.pin_cpus")
+    parser.add_argument("--ticks", type=int, default=1000, help="ticks per variant and round")
+    parser.add_argument("--repeats", type=int, default=9, help="rounds")
+    parser.add_argument("--busy-repeats", type=int, default=7, help="rounds beside one busy process")
+    parser.add_argument("--block", type=int, default=50, help="ticks a variant runs before the next one's turn")
+    parser.add_argument("--work-us", type=float, default=90.0, help="the body's work per tick (its physics)")
+    parser.add_argument("--spin-us", type=float, default=200.0, help="lockstep.spin_us of the framework before")
+    parser.add_argument("--no-startup", action="store_true", help="skip the sfl run start-up timing")
     args = parser.parse_args()
-    spin = args.spin_us * 1e-6
-    # every variant placed as sfl run places a body and its controller process (lockstep.pin_cpus)
     cpus = usable_cpus()
-    placed = assign(["body", "controller"], cpus, args.pin)
-    pin(placed.get("body"))
+    one = [cpus[-1]] if len(cpus) > 1 else None  # as lockstep.pin_cpus auto places a pair
+    two = ([cpus[0]], [cpus[-1]]) if len(cpus) > 1 else (None, None)
+    tick = functools.partial(_floor.work, _floor.calibrate(args.work_us))
+    print(f"before: {_floor.machine_load()}", flush=True)
     endpoint = bus.free_endpoint()
     session = bus.open_session([endpoint], [])
-    sides = {}
+    folder = tempfile.mkdtemp(prefix="sfl-")
+    tmp = Path(folder)
+    sides: dict = {"one process": OneProcess(one)}
+    spin = args.spin_us * 1e-6
     try:
-        for kind in ("raw", "polling", "example", "typed"):
-            sides[kind] = Raw(session, endpoint, kind, placed.get("controller"), spin)
-        sides["framework"] = Framework(session, endpoint, placed.get("controller"), spin)
-        times = {kind: [] for kind in sides}
-        blocks = {kind: [] for kind in sides}  # the median of each block
+        sides["pipe, both block, two cores"] = _floor.Pair("pipe", 0, *two, tmp)
+        sides["pipe, both block, one core"] = _floor.Pair("pipe", 0, one, one, tmp)
+        sides["shared memory, both spin, not pinned"] = _floor.Pair("shm", 0, None, None, tmp)
+        sides["bare Zenoh, mesh (tcp), both block, two cores"] = _floor.Pair("zenoh-mesh", 0, *two, tmp)
+        sides["framework before: mesh, not pinned, body polls"] = Framework(
+            session, endpoint, "benchbefore", folder, "never", "mesh", spin
+        )
+        sides["bare Zenoh, mesh (tcp), both block, one core"] = _floor.Pair("zenoh-mesh", 0, one, one, tmp)
+        sides["bare Zenoh, lockstep link, both block, one core"] = _floor.Pair("zenoh-tick", 0, one, one, tmp)
+        sides["  + typed messages and controller, by hand"] = _floor.Pair("zenoh-tick-typed", 0, one, one, tmp)
+        sides["framework: lockstep link, both block, one core"] = Framework(
+            session, endpoint, "benchnow", folder, "auto", "tick", spin
+        )
         for side in sides.values():
-            side.block(300)  # warm up
-        block = max(args.ticks // args.blocks, 1)
-        for _ in range(args.blocks):  # interleaved blocks, so that all see the same machine load
-            for kind, side in sides.items():
-                t = side.block(block)
-                times[kind] += t
-                blocks[kind].append(np.median(t))
+            side.run(200, tick)  # warm up
+        ratios = rounds(sides, "one process", args.repeats, args.ticks, args.block, tick)
+        during = _floor.machine_load()
+        busy_names = [
+            "one process",
+            "shared memory, both spin, not pinned",
+            "bare Zenoh, lockstep link, both block, one core",
+            "framework: lockstep link, both block, one core",
+        ]
+        neighbour = _floor.Busy()
+        try:
+            busy = rounds(
+                {n: sides[n] for n in busy_names}, "one process", args.busy_repeats, args.ticks, args.block, tick
+            )
+        finally:
+            neighbour.close()
+        beside = _floor.machine_load()
+        reference = sides["one process"].run(args.ticks, tick) / args.ticks
     finally:
         for side in sides.values():
             side.close()
         session.close()
-    # the goal's baseline: the faster bare pattern, blocking or polling
-    base = min(("raw", "polling"), key=lambda kind: np.median(times[kind]))
-    raw_t, example_t, typed_t, framework_t = times[base], times["example"], times["typed"], times["framework"]
-    paired = np.array(blocks["framework"]) / np.array(blocks[base])
-    over_typed = np.array(blocks["framework"]) / np.array(blocks["typed"])
-    local = in_process_round_trips(args.ticks)
-    where = f"pin {args.pin}: " + (
-        f"ping on cores {placed['body']}, pong on {placed['controller']}" if placed else "not pinned"
-    )
-    print(f"lockstep round trip per tick, {args.ticks} ticks, {where}, spin {args.spin_us:g} us")
-    print(f"  raw zenoh pub/sub (2 processes)      {stats(times['raw'])}")
-    print(f"  the same, ping polling first         {stats(times['polling'])}")
-    print(f"  zenoh's z_ping/z_pong (2 processes)  {stats(example_t)}")
-    print(f"  typed messages by hand (2 processes) {stats(typed_t)}")
-    print(f"  sfl BusLink <-> host (2 processes)   {stats(framework_t)}")
-    print(f"  sfl InProcessLink (1 process)        {stats(local)}")
-    ratio = np.median(framework_t) / np.median(raw_t)
-    added = (np.median(framework_t) - np.median(raw_t)) * 1e6
-    label = "raw" if base == "raw" else "raw polling"
+        shutil.rmtree(folder, ignore_errors=True)
+    where = f"one core = core {one[0]}, two cores = {two[0][0]} and {two[1][0]}" if one else "nothing pinned (1 core)"
     print(
-        f"  framework / {label} (medians, the faster raw pattern): {ratio:.2f}  (goal <= 1.20); "
-        f"the framework adds {added:.1f} us per tick"
+        f"lockstep tick: {args.work_us:g} us of body work, 240 B out, 96 B back; {args.ticks} ticks per round in "
+        f"blocks of {args.block}; medians of {args.repeats} rounds, over one process in the same round "
+        f"(one process: {reference * 1e6:.1f} us per tick); {where}; during: {during}"
     )
-    q1, q2, q3 = np.percentile(paired, [25, 50, 75])
+    width = max(map(len, ratios))
+    for name, r in ratios.items():
+        q1, q3 = np.percentile(r, [25, 75])
+        print(f"  {name:<{width}}  {np.median(r):5.2f}  (IQR {q1:.2f}-{q3:.2f})")
+    raw = np.median(ratios["bare Zenoh, lockstep link, both block, one core"])
+    typed = np.median(ratios["  + typed messages and controller, by hand"])
+    framework = np.median(ratios["framework: lockstep link, both block, one core"])
+    added = (framework - raw) * reference * 1e6
     print(
-        f"  framework / {label}, block by block ({len(paired)} pairs of adjacent blocks): "
-        f"median {q2:.2f}, IQR {q1:.2f}-{q3:.2f}"
+        f"  framework / bare Zenoh in the same configuration (lockstep link, one core): {framework / raw:.2f} "
+        f"(goal <= 1.10); the framework adds {added:.1f} us per tick, of which the typed messages and the "
+        f"controller's step by hand {(typed - raw) * reference * 1e6:.1f} us"
     )
-    print(f"  framework / z_ping-z_pong (medians): {np.median(framework_t) / np.median(example_t):.2f}")
-    q1, q2, q3 = np.percentile(over_typed, [25, 50, 75])
-    print(
-        f"  framework / typed messages by hand, block by block: median {q2:.2f}, IQR {q1:.2f}-{q3:.2f}; "
-        f"by hand, the typed messages add {(np.median(typed_t) - np.median(raw_t)) * 1e6:.1f} us per tick to raw"
-    )
-    pin(cpus)  # sfl run places its own processes
-    s = startup()
-    print(
-        f"sfl run start-up, 5 module processes: ready {np.median(s[:, 0]):.2f} s, first trial done "
-        f"{np.median(s[:, 1]):.2f} s (median of {len(s)}; goal <= 2 s)"
-    )
+    print(f"beside one busy process: medians of {args.busy_repeats} rounds; {beside}")
+    for name, r in busy.items():
+        q1, q3 = np.percentile(r, [25, 75])
+        print(f"  {name:<{width}}  {np.median(r):5.2f}  (IQR {q1:.2f}-{q3:.2f})")
+    if args.no_startup:
+        return
+    started = startup()
+    for mode, s in started.items():
+        print(
+            f"sfl run start-up, 5 module processes, lockstep.pin_cpus {mode}: all alive {np.median(s[:, 0]):.2f} s, "
+            f"first trial done {np.median(s[:, 1]):.2f} s (median of {len(s)}, interleaved; goal <= 2 s)"
+        )
+    print(f"after: {_floor.machine_load()}")
 
 
 if __name__ == "__main__":

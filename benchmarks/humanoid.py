@@ -1,47 +1,56 @@
-"""Wall time of one 10-s trial of the NAO-sized humanoid walking on its CPG, three ways, side by side.
+"""Wall time of one 10-s trial of the NAO-sized humanoid walking on its CPG, in one process and over processes.
 
-    python benchmarks/humanoid.py [--repeats 5] [--spin-us 400] [--pin never|auto|always] [--quick]
+    python benchmarks/humanoid.py [--repeats 9] [--spin-us 400] [--pin auto|always|never] [--quick]
 
 Each item is one trial of 10 s of simulated time (1000 control ticks of 10 ms, 4000 PyBullet steps at 400 Hz),
-interleaved so that all see the same machine load; medians over ``--repeats``:
+interleaved in a shuffled order so that all see the same machine load, ``--repeats`` rounds; times are medians over
+the rounds, ratios medians of the ratios within each round; the load average is printed:
 
 (a) physics only: the body built for the trial, then ``actuate`` with the standing command 1000 times (no sensing, no
     controller, no messages), as ``benchmarks/planar.py`` (a) steps the planar biped;
 (a') the body's whole trial with a constant controller in its process (the standing pose): (a) plus sensing (the
     foot pressure sensors read PyBullet's contact points), judging and the framework's tick (messages, checks);
 (b) the default gait: ``CPGController`` with the ``humanoid_nao`` circuit in the body's process (``InProcessLink``),
-    the trial as ``sfl run`` runs it with ``colocate: true``;
+    the trial as ``sfl run`` runs it with ``colocate: true``; (a), (a') and (b) run on the core (c) places its pair on,
+    so that all meet the same neighbours on a busy machine;
 (c) the same trial with controller and body each hosted in its own process by ``sfl_brain.host``, as ``sfl run`` hosts
-    them, lockstep over Zenoh (1000 ticks); the trial is a request from this process, timed from request to reply.
-    The body waits for each command as ``lockstep.spin_us`` ``--spin-us`` says, the two are placed as
-    ``lockstep.pin_cpus`` ``--pin`` says (defaults as in ``scenarios/humanoid_walk.yaml``: spin 400 us, not pinned).
+    them: placed as ``lockstep.pin_cpus`` ``--pin`` says (default ``auto``: both on one core, blocking), their frames
+    and commands on their lockstep link (Zenoh's lowlatency transport); the trial is a request from this process,
+    timed from request to reply;
+(c-free) not pinned, the body polling up to ``--spin-us`` (``lockstep.spin_us``, default the scenario's 400 us) for
+    each command, on the lockstep link: what the placement alone gives;
+(c-mesh) placed as (c), but the ticks on the run's mesh: what the link alone gives;
+(c-before) not pinned, polling, on the mesh: as before issue 24.
+Every trial over processes is checked bit for bit against the one-process trial once.
 
-Goals (issue 16): (b) >= 20x real time, (c) >= 10x, and the CPG plus the bus cheaper than the physics:
-(c) - (a) < (a). The gait does not reach the 1.5-m line in 10 s (about 13.2 s, docs/results/chapter4/humanoid.md),
-so every timed trial lasts the full 10 s; a trial that ends early (a fall) fails the benchmark.
-``--quick``: 2 repeats, for a smoke test.
+Goals (issue 24): (c) >= 20x real time and (b)/(c) >= 0.8 (issue 16: (b) >= 20x, and the CPG plus the bus cheaper than
+the physics: (c) - (a) < (a)). The gait does not reach the 1.5-m line in 10 s (about 13.2 s,
+docs/results/chapter4/humanoid.md), so every timed trial lasts the full 10 s; a trial that ends early (a fall) fails the
+benchmark. ``--quick``: 2 repeats, (c) only, for a smoke test.
 """
 
 from __future__ import annotations
 
 import argparse
+import shutil
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import controller_spec, spawn_host, wait_alive  # noqa: E402
+from _common import HostedPair, Pinned  # noqa: E402
+from _floor import machine_load  # noqa: E402
 
 from sfl_brain import bus  # noqa: E402
 from sfl_brain.bodies.humanoid import JOINT_NAMES, Humanoid  # noqa: E402
 from sfl_brain.bodies.humanoid_table import STANDING  # noqa: E402
 from sfl_brain.body import Controller, InProcessLink  # noqa: E402
 from sfl_brain.host import request  # noqa: E402
-from sfl_brain.messages import SensorFrame, TrialRequest  # noqa: E402
+from sfl_brain.messages import TrialRequest  # noqa: E402
 from sfl_brain.modules.controllers.cpg import CPGController, CPGParams  # noqa: E402
-from sfl_brain.placement import assign, usable_cpus  # noqa: E402
 from sfl_brain.scenario import load  # noqa: E402
 
 #: the body's poll for each command in the humanoid's scenario (us), the benchmark's default
@@ -91,24 +100,22 @@ def whole_trial(body: Humanoid) -> tuple[float, dict]:
     return elapsed, {"success": result.success, **result.metrics}
 
 
-class Processes:
+class Processes(HostedPair):
     """(c): the humanoid and the CPG controller, each hosted in its own process as ``sfl run`` hosts them; a trial is a
     request from here, as the supervisor sends it."""
 
-    def __init__(self, session, endpoint: str, run_id: str, placed: dict, spin: float) -> None:
-        controller = controller_spec(run_id, "sfl_brain.modules.controllers.cpg:CPGController", endpoint)
-        controller.update(params=CONTROLLER_PARAMS, cpus=placed.get("controller"))
-        body = controller_spec(run_id, "sfl_brain.bodies.humanoid:Humanoid", endpoint, placed.get("body"))
-        body.update(
-            instance="body",
-            spec_name="body",
-            params=BODY_PARAMS,
-            routes={SensorFrame.TAG: "controller"},
-            spin=spin,
+    def __init__(self, session, endpoint: str, run_id: str, folder: str, **placed) -> None:
+        super().__init__(
+            session,
+            endpoint,
+            run_id,
+            "sfl_brain.modules.controllers.cpg:CPGController",
+            "sfl_brain.bodies.humanoid:Humanoid",
+            folder=folder,
+            controller_params=CONTROLLER_PARAMS,
+            body_params=BODY_PARAMS,
+            **placed,
         )
-        self.procs = [spawn_host(controller), spawn_host(body)]
-        for name in ("controller", "body"):
-            wait_alive(session, bus.alive_key(run_id, name))
         self.session, self.key = session, bus.key(run_id, "body", TrialRequest.TAG)
 
     def trial(self) -> tuple[float, dict]:
@@ -118,65 +125,105 @@ class Processes:
         assert result.metrics["time"] >= SECONDS - 1e-6 and not result.metrics["fell"], result
         return elapsed, {"success": result.success, **result.metrics}
 
-    def close(self) -> None:
-        for proc in self.procs:
-            proc.terminate()
-            proc.wait(timeout=10)
-
 
 def main(argv: list[str] | None = None) -> dict[str, float]:
     parser = argparse.ArgumentParser()
-    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--repeats", type=int, default=9, help="rounds")
     parser.add_argument(
         "--spin-us", type=float, default=SCENARIO_SPIN_US, help="lockstep.spin_us (default: the humanoid scenario's)"
     )
-    parser.add_argument("--pin", choices=["never", "auto", "always"], default="never", help="lockstep.pin_cpus")
-    parser.add_argument("--quick", action="store_true", help="2 repeats: a smoke test")
+    parser.add_argument("--pin", choices=["auto", "always", "never"], default="auto", help="lockstep.pin_cpus of (c)")
+    parser.add_argument("--quick", action="store_true", help="2 repeats, (c) only: a smoke test")
     args = parser.parse_args(argv)
     repeats = 2 if args.quick else args.repeats
+    spin = args.spin_us * 1e-6
+    print(f"before: {machine_load()}", flush=True)
     endpoint = bus.free_endpoint()
     session = bus.open_session([endpoint], [])
-    placed = assign(["body", "controller"], usable_cpus(), args.pin)  # as sfl run places one worker and its controller
+    folder = tempfile.mkdtemp(prefix="sfl-")
     physics_body = new_body()
     standing_body = new_body()
     standing_body.link = InProcessLink(Standing())
     cpg_body = new_body()
     cpg_body.link = InProcessLink(CPGController(CPGParams(**CONTROLLER_PARAMS)))
-    a, a1, b, c = [], [], [], []
-    pair = None
+    times: dict[str, list[float]] = {}
+    pairs: dict[str, Processes] = {}
+    variants = {
+        "c": {"pin": args.pin, "link": "tick", "spin": spin},
+        "c-free": {"pin": "never", "link": "tick", "spin": spin},
+        "c-mesh": {"pin": args.pin, "link": "mesh", "spin": spin},
+        "c-before": {"pin": "never", "link": "mesh", "spin": spin},
+    }
+    if args.quick:
+        variants = {"c": variants["c"]}
     try:
-        pair = Processes(session, endpoint, "benchhumanoid", placed, args.spin_us * 1e-6)
+        for name, placed in variants.items():
+            pairs[name] = Processes(session, endpoint, f"benchhumanoid{len(pairs)}", folder, **placed)
         in_process = whole_trial(cpg_body)[1]  # warm-up: worlds built, caches filled
-        over_bus = pair.trial()[1]
-        assert over_bus == in_process, (over_bus, in_process)  # the same trial over processes, bit for bit
+        for pair in pairs.values():
+            over_bus = pair.trial()[1]
+            assert over_bus == in_process, (over_bus, in_process)  # the same trial over processes, bit for bit
         whole_trial(standing_body)
-        for _ in range(repeats):  # interleaved, so that all see the same machine load
-            a.append(physics_only(physics_body))
-            a1.append(whole_trial(standing_body)[0])
-            b.append(whole_trial(cpg_body)[0])
-            c.append(pair.trial()[0])
+        core = pairs["c"].placement.of("body")  # the one-process trials run on the pair's core
+        order, shuffle = ["a", "a1", "b", *pairs], np.random.default_rng(0).shuffle
+        for _ in range(repeats):  # interleaved in a shuffled order, so that all see the same machine load
+            shuffle(order)
+            for name in order:
+                if name in pairs:
+                    t = pairs[name].trial()[0]
+                else:
+                    with Pinned(core):
+                        if name == "a":
+                            t = physics_only(physics_body)
+                        else:
+                            t = whole_trial(standing_body if name == "a1" else cpg_body)[0]
+                times.setdefault(name, []).append(t)
+        during = machine_load()
     finally:
-        if pair is not None:
+        for pair in pairs.values():
             pair.close()
         session.close()
+        shutil.rmtree(folder, ignore_errors=True)
         for body in (physics_body, standing_body, cpg_body):
             body.close()
-    a, a1, b, c = (float(np.median(x)) for x in (a, a1, b, c))
-    where = f"spin {args.spin_us:g} us, pin {args.pin}: " + (
-        f"body on cores {placed['body']}, controller on {placed['controller']}" if placed else "not pinned"
+    m = {name: float(np.median(v)) for name, v in times.items()}
+    a, a1, b, c = m["a"], m["a1"], m["b"], m["c"]
+
+    def ratio(x: str, y: str) -> float:
+        """The median over rounds of x / y in the same round (paired: a slow drift of the load cancels)."""
+        return float(np.median(np.array(times[x]) / np.array(times[y])))
+
+    print(
+        f"humanoid: one {SECONDS:g}-s trial (1000 control ticks, 4000 physics steps), {repeats} rounds, interleaved; "
+        "times: medians; ratios: medians of the ratios within a round"
     )
-    print(f"humanoid: one {SECONDS:g}-s trial (1000 control ticks, 4000 physics steps), median of {repeats}, {where}")
+    print(f"  (c) placed by lockstep.pin_cpus {args.pin}: {pairs_where(args.pin)}; during: {during}")
     print(f"  (a)  physics only, standing command      {a * 1e3:7.1f} ms  ({SECONDS / a:5.1f}x real time)")
     print(f"  (a') body trial, constant controller     {a1 * 1e3:7.1f} ms  ({SECONDS / a1:5.1f}x real time)")
     print(f"  (b)  CPG + body, one process             {b * 1e3:7.1f} ms  ({SECONDS / b:5.1f}x real time; goal >= 20x)")
-    print(f"  (c)  CPG + body over Zenoh               {c * 1e3:7.1f} ms  ({SECONDS / c:5.1f}x real time; goal >= 10x)")
-    print(f"  (b)/(a) = {b / a:.2f}   (c)/(b) = {c / b:.2f}   (c)/(a) = {c / a:.2f}")
+    print(f"  (c)  CPG + body over processes           {c * 1e3:7.1f} ms  ({SECONDS / c:5.1f}x real time; goal >= 20x)")
+    print(f"  (b)/(c) = {ratio('b', 'c'):.2f} of the one-process speed over processes (goal >= 0.8)")
+    print(f"  (b)/(a) = {ratio('b', 'a'):.2f}   (c)/(b) = {ratio('c', 'b'):.2f}   (c)/(a) = {ratio('c', 'a'):.2f}")
+    for name, label in (
+        ("c-free", f"not pinned, the body polling {args.spin_us:g} us, lockstep link"),
+        ("c-mesh", "placed as (c), ticks on the mesh"),
+        ("c-before", f"not pinned, the body polling {args.spin_us:g} us, ticks on the mesh (before issue 24)"),
+    ):
+        if name in m:
+            print(f"  ({name}) {label}: {m[name] * 1e3:.1f} ms, ({name})/(b) = {ratio(name, 'b'):.2f}")
     print(
         f"  beyond the physics: sensing + framework (a')-(a) = {(a1 - a) * 1e3:.1f} ms, CPG (b)-(a') = "
         f"{(b - a1) * 1e3:.1f} ms, bus (c)-(b) = {(c - b) * 1e3:.1f} ms; CPG + bus (c)-(a) = {(c - a) * 1e3:.1f} ms "
         f"vs physics {a * 1e3:.1f} ms (goal: less)"
     )
+    print(f"after: {machine_load()}")
     return {"physics": a, "standing_trial": a1, "one_process": b, "processes": c}
+
+
+def pairs_where(mode: str) -> str:
+    from sfl_brain.placement import Pair, place, usable_cpus
+
+    return place([Pair("body", "controller")], [], usable_cpus(), mode).reason
 
 
 if __name__ == "__main__":

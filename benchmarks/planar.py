@@ -1,22 +1,40 @@
-"""Wall time of one 10-s trial of the planar walker, three ways, plus the parallel grid.
+"""Wall time of one 10-s trial of the planar walker, in one process and over processes, beside its floors.
 
-    python benchmarks/planar.py [--repeats 9] [--grid 15] [--spin-us 200] [--pin never|auto|always]
+    python benchmarks/planar.py [--repeats 21] [--busy-repeats 15] [--grid 15] [--spin-us 200]
+                                [--pin auto|always|never] [--no-sweep]
 
-(a) physics only, fixed open-loop command; (b) reflexive controller and body in one process;
+Every variant runs once per round, one after the other in a shuffled order (interleaved, so that all
+see the same machine load), for ``--repeats`` rounds; a time is a median over the rounds, a ratio the
+median of the ratios within each round. The load average is printed.
+
+(a) physics only, fixed open-loop command; (b) reflexive controller and body in one process; both on
+    the core (c) places its pair on, so that both meet the same neighbours on a busy machine;
 (b0) the same with the body as it stepped before its hot path was batched (``_planar_before.py``),
     with the same metrics bit for bit (checked on every repeat);
 (c) controller and body each hosted in its own process by ``sfl_brain.host``, as ``sfl run`` hosts
-    them, lockstep over Zenoh (1000 ticks); the trial is a request from this process, timed from
-    request to reply. The body waits for each command as ``lockstep.spin_us`` ``--spin-us`` says
-    and the two are placed as ``lockstep.pin_cpus`` ``--pin`` says (defaults as in a scenario; the
-    sweeps too); (c0) is the same pair with the body sleeping at once (spin 0), for comparison;
+    them: placed as ``lockstep.pin_cpus`` ``--pin`` says (default ``auto``: both on one core), their
+    frames and commands on their lockstep link (Zenoh's lowlatency transport); the trial is a request
+    from this process, timed from request to reply;
+(c-free) the same pair not pinned (``pin_cpus: never``), the body polling up to ``--spin-us`` for
+    each command (``lockstep.spin_us``): the placement before issue 24;
+(c-mesh) the pair placed as (c), but its frames and commands on the run's mesh;
+(c-apart) the pair on a core each (as ``pin_cpus: always`` placed it before issue 24), the body
+    polling, on its lockstep link;
+then the floors of a lockstep pair whose body steps (a)'s physics each tick and whose controller answers at
+once (``_floor.py``), against (a): a pipe, both on the pair's core; shared memory, both spinning, not pinned;
+bare Zenoh on the lockstep link's configuration, both on the pair's core: the framework's baseline
+(framework / bare Zenoh = ((c)/(b)) / (bare Zenoh/(a)));
+then (a), (b), (c), bare Zenoh and the spinning pair again beside one busy process (a process this
+benchmark starts, spinning, unpinned);
 then a sweep of a grid x grid subset of the E3.1 grid with 1 and with 2 body workers, with the
-controllers colocated in the body workers and as separate processes.
+controllers colocated in the body workers and as separate processes (``--no-sweep``: skipped).
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
+import shutil
 import sys
 import tempfile
 import time
@@ -25,18 +43,19 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import controller_spec, spawn_host, wait_alive  # noqa: E402
+import _floor  # noqa: E402
+from _common import HostedPair, Pinned  # noqa: E402
 from _planar_before import PlanarBipedBefore  # noqa: E402
 
 from sfl_brain import bus  # noqa: E402
 from sfl_brain.bodies.planar_biped import PlanarBiped  # noqa: E402
 from sfl_brain.body import InProcessLink  # noqa: E402
 from sfl_brain.host import request  # noqa: E402
-from sfl_brain.messages import SensorFrame, TrialRequest  # noqa: E402
+from sfl_brain.messages import TrialRequest  # noqa: E402
 from sfl_brain.modules.controllers.reflex import ReflexController  # noqa: E402
-from sfl_brain.placement import assign, usable_cpus  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
+TICKS = 1000  # control ticks of a 10-s trial
 REQUEST = TrialRequest(
     trial_id=0,
     seed=0,
@@ -44,16 +63,24 @@ REQUEST = TrialRequest(
     controller_params={"alpha_hip": 10.0, "theta_hip_max_deg": 110.0},
     log=False,
 )
+BODY = "sfl_brain.bodies.planar_biped:PlanarBiped"
+CONTROLLER = "sfl_brain.modules.controllers.reflex:ReflexController"
 
 
-def physics_only() -> float:
+def physics_tick():
+    """One control tick of the walker's physics with a fixed open-loop command, on a freshly started trial:
+    (a)'s work, and the body's work of every floor."""
     body = PlanarBiped()
     body.logging = False
     body.start_trial(REQUEST)
-    command = np.array([1.0, -1.0, 0.5, 0.5])
+    return functools.partial(body.actuate, np.array([1.0, -1.0, 0.5, 0.5]))
+
+
+def physics_only() -> float:
+    tick = physics_tick()
     t = time.perf_counter()
-    for _ in range(1000):
-        body.actuate(command)
+    for _ in range(TICKS):
+        tick()
     return time.perf_counter() - t
 
 
@@ -67,18 +94,11 @@ def one_process(body_class=PlanarBiped) -> tuple[float, dict]:
     return elapsed, {"success": result.success, "quality": result.quality, **result.metrics}
 
 
-class Processes:
-    """(c): the walker and the reflex controller, each hosted in its own process as sfl run hosts
-    them; a trial is a request from here, as the supervisor sends it."""
+class Processes(HostedPair):
+    """(c): the walker and the reflex controller hosted as sfl run hosts them; a trial is a request from here."""
 
-    def __init__(self, session, endpoint, run_id, placed, spin) -> None:
-        controller = controller_spec(run_id, "sfl_brain.modules.controllers.reflex:ReflexController", endpoint)
-        body = controller_spec(run_id, "sfl_brain.bodies.planar_biped:PlanarBiped", endpoint, placed.get("body"))
-        body.update(instance="body", spec_name="body", routes={SensorFrame.TAG: "controller"}, spin=spin)
-        controller["cpus"] = placed.get("controller")
-        self.procs = [spawn_host(controller), spawn_host(body)]
-        for name in ("controller", "body"):
-            wait_alive(session, bus.alive_key(run_id, name))
+    def __init__(self, session, endpoint, run_id, folder, **placed) -> None:
+        super().__init__(session, endpoint, run_id, CONTROLLER, BODY, folder=folder, **placed)
         self.session, self.key = session, bus.key(run_id, "body", TrialRequest.TAG)
 
     def trial(self) -> float:
@@ -87,11 +107,6 @@ class Processes:
         elapsed = time.perf_counter() - t
         assert result.metrics["time"] >= 9.99, result
         return elapsed
-
-    def close(self) -> None:
-        for proc in self.procs:
-            proc.terminate()
-            proc.wait(timeout=10)
 
 
 def sweep(workers: int, grid: int, colocate: bool, lockstep: list[str]) -> float:
@@ -116,52 +131,124 @@ def sweep(workers: int, grid: int, colocate: bool, lockstep: list[str]) -> float
         return time.perf_counter() - t
 
 
+def median(samples) -> float:
+    return float(np.median(samples))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
-    parser.add_argument("--repeats", type=int, default=9)
+    parser.add_argument("--repeats", type=int, default=21, help="rounds")
+    parser.add_argument("--busy-repeats", type=int, default=15, help="rounds beside one busy process")
     parser.add_argument("--grid", type=int, default=15)
     parser.add_argument("--spin-us", type=float, default=200.0, help="lockstep.spin_us")
-    parser.add_argument("--pin", choices=["never", "auto", "always"], default="never", help="lockstep.pin_cpus")
+    parser.add_argument("--pin", choices=["auto", "always", "never"], default="auto", help="lockstep.pin_cpus of (c)")
+    parser.add_argument("--no-sweep", action="store_true", help="skip the sweeps")
     args = parser.parse_args()
+    spin = args.spin_us * 1e-6
+    print(f"before: {_floor.machine_load()}", flush=True)
     endpoint = bus.free_endpoint()
     session = bus.open_session([endpoint], [])
-    # as sfl run places one body worker and its controller process
-    placed = assign(["body", "controller"], usable_cpus(), args.pin)
-    a, b, b0, c, c0 = [], [], [], [], []
-    pairs = []
+    folder = tempfile.mkdtemp(prefix="sfl-")
+    runs: dict[str, list[float]] = {}
+    busy: dict[str, list[float]] = {}
+    hosted: dict[str, Processes] = {}
+    floors: dict[str, _floor.Pair] = {}
     try:
-        pairs.append(Processes(session, endpoint, "benchplanar", placed, args.spin_us * 1e-6))
-        pairs.append(Processes(session, endpoint, "benchplanar0", placed, 0.0))
-        for pair in pairs:
+        hosted["c"] = Processes(session, endpoint, "benchplanar", folder, pin=args.pin, spin=spin)
+        hosted["c-free"] = Processes(session, endpoint, "benchplanarfree", folder, pin="never", spin=spin)
+        hosted["c-mesh"] = Processes(session, endpoint, "benchplanarmesh", folder, pin=args.pin, link="mesh", spin=spin)
+        hosted["c-apart"] = Processes(session, endpoint, "benchplanarapart", folder, pin="apart", spin=spin)
+        for pair in hosted.values():
             pair.trial()  # warm up
-        for _ in range(args.repeats):  # interleaved, so that all see the same machine load
-            a.append(physics_only())
-            elapsed, metrics = one_process()
-            b.append(elapsed)
-            elapsed, before = one_process(PlanarBipedBefore)
-            b0.append(elapsed)
-            assert metrics == before, (metrics, before)  # the same trial, bit for bit
-            c.append(pairs[0].trial())
-            c0.append(pairs[1].trial())
+        # the floors: the body steps the walker's physics each tick, as (a), and the controller answers at once
+        core = hosted["c"].placement.of("body")  # the pair's core (None: not pinned)
+        floors["pipe"] = _floor.Pair("pipe", 0, core, core, Path(folder))
+        floors["shm"] = _floor.Pair("shm", 0, None, None, Path(folder))
+        floors["zenoh"] = _floor.Pair("zenoh-tick", 0, core, core, Path(folder))
+        for pair in floors.values():
+            pair.run(100, physics_tick())  # warm up
+
+        def round_(into: dict[str, list[float]], names: list[str]) -> None:
+            for name in names:
+                if name == "a":
+                    with Pinned(core):
+                        t = physics_only()
+                elif name == "b":
+                    with Pinned(core):
+                        t, metrics = one_process()
+                    if "b0" in names:
+                        with Pinned(core):
+                            t0, before = one_process(PlanarBipedBefore)
+                        assert metrics == before, (metrics, before)  # the same trial, bit for bit
+                        into.setdefault("b0", []).append(t0)
+                elif name in hosted:
+                    t = hosted[name].trial()
+                elif name in floors:
+                    t = floors[name].run(TICKS, physics_tick())
+                else:
+                    continue
+                into.setdefault(name, []).append(t)
+
+        everything = ["a", "b", "b0", "c", "c-free", "c-mesh", "c-apart", "pipe", "shm", "zenoh"]
+        shuffle = np.random.default_rng(0).shuffle
+        for _ in range(args.repeats):  # interleaved, so that all see the same machine load, in a shuffled order
+            shuffle(everything)
+            round_(runs, everything)
+        during = _floor.machine_load()
+        neighbour = _floor.Busy()
+        try:
+            besides = ["a", "b", "c", "zenoh", "shm"]
+            for _ in range(args.busy_repeats):
+                shuffle(besides)
+                round_(busy, besides)
+        finally:
+            neighbour.close()
+        beside = _floor.machine_load()
     finally:
-        for pair in pairs:
+        for pair in [*hosted.values(), *floors.values()]:
             pair.close()
         session.close()
-    a, b, b0, c, c0 = np.median(a), np.median(b), np.median(b0), np.median(c), np.median(c0)
-    where = f"spin {args.spin_us:g} us, pin {args.pin}: " + (
-        f"body on cores {placed['body']}, controller on {placed['controller']}" if placed else "not pinned"
+        shutil.rmtree(folder, ignore_errors=True)
+    m = {name: median(v) for name, v in runs.items()}
+    a, b, b0, c = m["a"], m["b"], m["b0"], m["c"]
+
+    def ratio(x: str, y: str, of=runs) -> float:
+        """The median over rounds of x / y in the same round (paired: a slow drift of the load cancels)."""
+        return median(np.array(of[x]) / np.array(of[y]))
+
+    print(
+        f"one 10-s trial ({TICKS} control ticks, 10 000 physics steps), {args.repeats} rounds, interleaved; "
+        "times: medians; ratios: medians of the ratios within a round"
     )
-    print(f"one 10-s trial (1000 control ticks, 10 000 physics steps), median of {args.repeats}, interleaved, {where}:")
+    print(f"  (c) placed by lockstep.pin_cpus {args.pin}: {hosted['c'].where()}; during: {during}")
     print(f"  (a) physics only, open loop         {a * 1e3:7.1f} ms  ({10 / a:5.1f}x real time)")
     print(f"  (b) controller + body, one process  {b * 1e3:7.1f} ms  ({10 / b:5.1f}x real time)")
-    print(f"  (c) controller + body over Zenoh    {c * 1e3:7.1f} ms  ({10 / c:5.1f}x real time; goal >= 20x)")
     print(f"  (b0) the same, the body as before batching  {b0 * 1e3:7.1f} ms  (identical metrics)")
-    print(f"  (b0)/(b) = {b0 / b:.2f} (goal >= 1.6)   (b)/(a) = {b / a:.2f} (goal <= 1.1)")
-    print(f"  (c)/(b) = {c / b:.2f} (goal <= 1.35)")
-    print(f"  (c0) the same, the body sleeping at once  {c0 * 1e3:7.1f} ms, (c0)/(b) = {c0 / b:.2f}")
-    print(f"  500 walking trials at (c): <= {500 * c:.0f} s (goal: E3.2 under 240 s; falls end trials early)")
+    print(f"  (b0)/(b) = {ratio('b0', 'b'):.2f} (goal >= 1.6)   (b)/(a) = {ratio('b', 'a'):.2f} (goal <= 1.1)")
+    print(f"  (c) controller + body over processes, lockstep link  {c * 1e3:7.1f} ms  ({10 / c:5.1f}x real time)")
+    print(f"  (c)/(b) = {ratio('c', 'b'):.2f} (goal <= 1.45)")
+    print(f"  (c-free) not pinned, the body polling {args.spin_us:g} us: (c-free)/(b) = {ratio('c-free', 'b'):.2f}")
+    print(f"  (c-mesh) placed as (c), ticks on the mesh: (c-mesh)/(b) = {ratio('c-mesh', 'b'):.2f}")
+    print(
+        f"  (c-apart) a core each, the body polling {args.spin_us:g} us, lockstep link: "
+        f"(c-apart)/(b) = {ratio('c-apart', 'b'):.2f}"
+    )
+    print("  floors: the body steps (a)'s physics each tick, the controller answers at once; against (a):")
+    where = f"core {core[0]}" if core else "not pinned"
+    print(f"    pipe, both blocking, both on {where}: {ratio('pipe', 'a'):.2f}")
+    print(f"    shared memory, both spinning, not pinned: {ratio('shm', 'a'):.2f}")
+    print(f"    bare Zenoh, lockstep link, both blocking on {where}: {ratio('zenoh', 'a'):.2f}")
+    framework_over_raw = ratio("c", "b") / ratio("zenoh", "a")
+    print(f"  framework / bare Zenoh in the same configuration: {framework_over_raw:.2f} (goal <= 1.10)")
+    print(f"beside one busy process, {args.busy_repeats} rounds ({beside}):")
+    print(f"  (c)/(b) = {ratio('c', 'b', busy):.2f} (goal <= 1.6)")
+    print(f"    shared memory, both spinning, not pinned: {ratio('shm', 'a', busy):.2f}")
+    print(f"    bare Zenoh, lockstep link, both blocking on {where}: {ratio('zenoh', 'a', busy):.2f}")
+    print(f"500 walking trials at (c): <= {500 * c:.0f} s (goal: E3.2 under 240 s; falls end trials early)")
+    if args.no_sweep:
+        return
     n = args.grid**2
-    print(f"sweep of {n} grid points (E3.1 subset), whole sfl run including start-up:")
+    print(f"sweep of {n} grid points (E3.1 subset), whole sfl run including start-up:", flush=True)
     for colocate, label in (
         (True, "controller inside each body worker (colocate: true)"),
         (False, "controller as its own process per worker"),
@@ -170,6 +257,7 @@ def main() -> None:
         one = sweep(1, args.grid, colocate, lockstep)
         two = sweep(2, args.grid, colocate, lockstep)
         print(f"  {label}: 1 worker {one:.1f} s, 2 workers {two:.1f} s, speed-up {one / two:.2f}x (goal >= 1.7x)")
+    print(f"after: {_floor.machine_load()}")
 
 
 if __name__ == "__main__":

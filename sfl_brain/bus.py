@@ -10,6 +10,10 @@ Sessions listen and connect on 127.0.0.1 with multicast scouting off unless the
 user passes other endpoints; peers find each other by gossip through the first
 endpoint, so the mesh is direct between every pair of processes.
 
+A body worker and its controller process exchange their per-tick frames and commands on a link of
+their own (:func:`open_tick_session`: Zenoh's lowlatency transport over a Unix socket), apart from
+the mesh.
+
 A run has a secret (:class:`Seal`): requests and replies carry a keyed MAC, liveliness tokens
 a proof, and lockstep frames the current trial's nonce (see ``docs/wire.md``); what lacks them is
 dropped and counted. Transport authentication and encryption (TLS, Zenoh user/password) are the
@@ -42,6 +46,9 @@ LEASE_MS = 1000
 #: benchmarks/bus.py went from 83-131 us to 65-95 us (medians, same load side by side), the raw Zenoh
 #: ping-pong with it; a planar trial over processes gained ~5%. A ``ZENOH_RUNTIME`` of the user's is kept.
 RUNTIME = "(rx: (handover: tx), acc: (handover: tx), app: (handover: tx), net: (handover: tx))"
+
+#: how soon a lockstep link's connecting end tries again after its other end went away (a restart)
+TICK_RETRY = {"period_init_ms": 10, "period_max_ms": 200, "period_increase_factor": 2}
 
 
 def key(run_id: str, instance: str, tag: str) -> str:
@@ -120,6 +127,45 @@ def config(
     conf.insert_json5("transport/link/tx/lease", str(LEASE_MS))
     conf.insert_json5("transport/link/tx/keep_alive", "4")
     return conf
+
+
+def tick_endpoint(folder: str | Path, pair: str) -> str:
+    """The lockstep link's endpoint for pair ``pair``: a Unix socket in ``folder`` (a folder only this
+    user may enter, so that only this user's processes can connect)."""
+    return f"unixsock-stream/{Path(folder) / pair}.sock"
+
+
+def tick_config(listen: list[str], connect: list[str]) -> zenoh.Config:
+    """The configuration of a lockstep link (see :func:`open_tick_session`)."""
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("listen/endpoints", json.dumps(listen))
+    conf.insert_json5("connect/endpoints", json.dumps(connect))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("scouting/gossip/enabled", "false")  # the two ends only: never part of the run's mesh
+    conf.insert_json5("scouting/delay", "0")  # open at once, whether the other end listens yet or not
+    conf.insert_json5("connect/retry", json.dumps(TICK_RETRY))
+    conf.insert_json5("transport/unicast/lowlatency", "true")
+    conf.insert_json5("transport/unicast/qos/enabled", "false")  # lowlatency needs QoS off, at both ends
+    conf.insert_json5("transport/link/tx/lease", str(LEASE_MS))
+    conf.insert_json5("transport/link/tx/keep_alive", "4")
+    return conf
+
+
+def open_tick_session(listen: list[str], connect: list[str]) -> zenoh.Session:
+    """A lockstep link: a Zenoh session of its own between a body worker and its controller process,
+    carrying only their per-tick frames and commands.
+
+    Zenoh's lowlatency transport (``transport/unicast/lowlatency``, QoS off at both ends) writes each
+    message to the socket as it is put, instead of handing it to a batching pipeline that another
+    thread drains: fewer wake-ups per tick (``benchmarks/bus.py``). It has no fragmentation: a
+    message over one batch (64 KiB) would be dropped when shared memory does not carry it, so the
+    run's requests, replies and liveliness (any size) stay on the run's mesh, and only frames and
+    commands (under 1 KiB) take this link. The controller's end listens on a Unix socket in a folder
+    only this user may enter (``tick_endpoint``); the body's end connects (and connects again within
+    :data:`TICK_RETRY` after a restart). No gossip: the link is never part of the mesh."""
+    os.environ.setdefault("ZENOH_RUNTIME", RUNTIME)
+    return zenoh.open(tick_config(listen, connect))
 
 
 def open_session(

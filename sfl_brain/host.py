@@ -8,10 +8,13 @@ hand or by the benchmarks: without a secret, anyone on the bus may sign messages
 The host opens a Zenoh peer session, answers each request type the module
 handles on ``sfl/<run>/<instance>/<tag>``, publishes replies to stream messages
 (lockstep ticks) to the instance named in its routes, and declares a liveliness
-token once it is ready. Requests are handed to one loop in the main thread (a
-trial may run for seconds); lockstep stream messages are answered by a thread
-that blocks in the subscriber's channel. A lock makes sure the module never sees
-two messages at once.
+token once it is ready. A body worker and its controller process also open their
+lockstep link (``spec["tick"]``, :func:`bus.open_tick_session`), which carries their
+frames and commands; a host whose spec names cores (``spec["cpus"]``, from
+:mod:`sfl_brain.placement`) pins itself to them before any session starts.
+Requests are handed to one loop in the main thread (a trial may run for seconds);
+lockstep stream messages are answered by a thread that blocks in the subscriber's
+channel. A lock makes sure the module never sees two messages at once.
 
 A malformed, unsigned, stale or foreign message is dropped and counted by reason (a request
 gets an error reply); each kind is logged once. At exit the counts go to
@@ -114,9 +117,15 @@ class SpinThenSleep:
 class BusLink:
     """A body's link to a controller in another process: lockstep pub/sub per tick.
 
+    Frames and commands go over ``ticks``, the pair's lockstep link (:func:`bus.open_tick_session`;
+    None: over the run's mesh, ``session``, as for a host started by hand); the reset request and the
+    controller's liveliness over the mesh. A trial starts once the link is up (the controller's
+    frame subscriber is matched), within ``timeout``.
+
     The body's thread publishes a frame and waits in the subscriber's ring channel for the
     command (no Python thread handoff on the tick path): it polls for up to ``spin`` seconds
-    while that pays (:class:`SpinThenSleep`), then blocks. A watchdog thread wakes the body with
+    while that pays (:class:`SpinThenSleep`), then blocks. A body that may use one core only
+    (pinned with its controller, ``sfl_brain.placement``) never polls. A watchdog thread wakes the body with
     an empty payload if a command is overdue, so a hung controller interrupts the trial after
     ``timeout`` seconds instead of blocking forever; a controller whose liveliness token goes
     away (it died) interrupts it at once.
@@ -138,21 +147,30 @@ class BusLink:
         *,
         secret: str | None = None,
         drops: bus.Drops | None = None,
+        ticks: zenoh.Session | None = None,
     ) -> None:
         self.session = session
+        self.ticks = ticks or session
         self.timeout = timeout
         self.run_id = run_id
         self.controller = controller
         self.seal = bus.Seal(secret)
         self.drops = drops or bus.Drops(log, body)
         # polling needs a core for the controller to answer on while the body polls: a body on
-        # one core (a 1-core machine, or pinned by lockstep.pin_cpus, where polling measured
-        # slower) sleeps at once
+        # one core (a 1-core machine, or sharing its core with its controller, lockstep.pin_cpus)
+        # sleeps at once, or it would starve the controller it waits for
         self.waiter = SpinThenSleep(spin if len(usable_cpus()) > 1 else 0.0)
         self.reset_key = bus.key(run_id, controller, ControllerReset.TAG)
         self.command_key = bus.key(run_id, body, MotorCommand.TAG)
-        self.publisher = session.declare_publisher(bus.key(run_id, controller, SensorFrame.TAG))
-        self.subscriber = session.declare_subscriber(self.command_key, zenoh.handlers.RingChannel(64))
+        self.publisher = self.ticks.declare_publisher(bus.key(run_id, controller, SensorFrame.TAG))
+        self.subscriber = self.ticks.declare_subscriber(self.command_key, zenoh.handlers.RingChannel(64))
+        # the link is up when the controller's frame subscriber is matched
+        self._linked = threading.Event()
+        self._matching = self.publisher.declare_matching_listener(
+            zenoh.handlers.Callback(self._on_matching, indirect=False)
+        )
+        if self.publisher.matching_status.matching:
+            self._linked.set()
         self.nonce = b""  # this trial's stream nonce (set by reset)
         self._waiting_since: float | None = None
         self._abort: str | None = None  # why the waiting tick must end (overdue command, stopping)
@@ -182,12 +200,15 @@ class BusLink:
             if self._waiting_since is not None and self._abort is None:
                 self._wake(f"the controller `{self.controller}` went away at tick {{tick}}")
 
+    def _on_matching(self, status: zenoh.MatchingStatus) -> None:
+        (self._linked.set if status.matching else self._linked.clear)()
+
     def _wake(self, reason: str) -> None:
         """End the waiting tick with LinkError(reason, ``{tick}`` filled in); an empty payload wakes recv()."""
         self._abort = reason
         if not self._closed.is_set():
             try:
-                self.session.put(self.command_key, b"")
+                self.ticks.put(self.command_key, b"")
             except Exception:  # the session is already closing: nothing waits any more
                 pass
 
@@ -214,6 +235,8 @@ class BusLink:
             request(self.session, self.reset_key, msg, self.timeout, seal=self.seal, nonce=self.nonce)
         except NoReply as exc:  # a late controller interrupts the trial (it is retried); its errors do not
             raise LinkError(f"controller reset for trial {msg.trial_id}: {exc}") from None
+        if not self._linked.wait(self.timeout):  # a restarted controller's link comes up with its process
+            raise LinkError(f"trial {msg.trial_id}: no lockstep link to `{self.controller}` within {self.timeout:g} s")
 
     def step(self, frame: SensorFrame) -> MotorCommand:
         clock = time.perf_counter
@@ -263,6 +286,7 @@ class BusLink:
     def close(self) -> None:
         self._closed.set()
         self._liveliness.undeclare()
+        self._matching.undeclare()
         self.subscriber.undeclare()
         self.publisher.undeclare()
 
@@ -380,6 +404,7 @@ class Host:
         self._lock = threading.Lock()  # the module sees one message at a time
         self._stopping = False
         self.link: BusLink | None = None  # a body's link to its controller in another process
+        self.ticks: zenoh.Session | None = None  # the lockstep link of a body worker or its controller process
         self.seal = bus.Seal(spec.get("secret"))
         self.drops = bus.Drops(log, self.instance)
         self._seen: deque[bytes] = deque(maxlen=self.SEEN)
@@ -411,7 +436,17 @@ class Host:
         rec = None
         sinks = []  # telemetry sinks to close at exit (after their modules)
         controller = None  # a controller hosted in this body worker
+        ticks = self.session
         try:
+            # a body worker and its controller process: their lockstep link ({"listen": ...} for the
+            # controller, {"connect": ...} for the body), or the mesh when the spec names none
+            tick = spec.get("tick")
+            if tick:
+                self.ticks = ticks = bus.open_tick_session(tick.get("listen", []), tick.get("connect", []))
+                ends = [f"listening on {e}" for e in tick.get("listen", [])] + [
+                    f"connecting to {e}" for e in tick.get("connect", [])
+                ]
+                log.info("lockstep link (lowlatency): %s", ", ".join(ends))
             rec = make_recording(self.run_id, spec.get("rrd"), spec.get("viewer"))
             live = bool(spec.get("viewer"))
             seconds = spec.get("trial_seconds")
@@ -442,12 +477,13 @@ class Host:
                         spec.get("spin", 0.0),
                         secret=spec.get("secret"),
                         drops=self.drops,
+                        ticks=self.ticks,
                     )
                     self.module.link = self.link
             for message_type in type(self.module).handles:
                 key_expr = bus.key(self.run_id, self.instance, message_type.TAG)
                 if message_type.STREAM:  # one thread blocks in recv(): no Python handoff per tick
-                    subscriber = self.session.declare_subscriber(key_expr, zenoh.handlers.RingChannel(64))
+                    subscriber = ticks.declare_subscriber(key_expr, zenoh.handlers.RingChannel(64))
                     thread = threading.Thread(
                         target=self._stream_loop,
                         args=(subscriber, message_type),
@@ -467,7 +503,7 @@ class Host:
         finally:
             self._stopping = True
             for key_expr, subscriber, thread in streams:
-                self.session.put(key_expr, b"")  # wakes the stream thread, which sees _stopping
+                ticks.put(key_expr, b"")  # wakes the stream thread, which sees _stopping
                 thread.join(timeout=2.0)
                 if not thread.is_alive():
                     subscriber.undeclare()
@@ -489,6 +525,8 @@ class Host:
                 problem = close_recording(rec)
                 if problem is not None:
                     log.warning("%s: the Rerun recording did not reach the disk (%s)", self.instance, problem)
+            if self.ticks is not None:
+                self.ticks.close()
             self.session.close()
             self.write_counters()
 
@@ -600,7 +638,7 @@ class Host:
                 publisher = publishers.get(reply.TAG)
                 if publisher is None:
                     key_expr = self._reply_key(reply.TAG)
-                    publisher = publishers[reply.TAG] = self.session.declare_publisher(key_expr)
+                    publisher = publishers[reply.TAG] = (self.ticks or self.session).declare_publisher(key_expr)
                 publisher.put(encode(reply) + stream[0])
 
 

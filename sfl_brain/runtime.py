@@ -26,9 +26,13 @@ joined with ``sfl worker`` stops when it goes away.
 from __future__ import annotations
 
 import itertools
+import json
 import logging
 import os
 import queue
+import shutil
+import socket
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,8 +43,8 @@ from . import bus, processes
 from .body import Body, Controller
 from .events import Events, ModuleAlive, ModuleDied, ModuleSilent, Restarted, WorkerJoined, WorkerLeft
 from .host import LinkError
-from .messages import Message, MessageError, NonFiniteError, decode, encode
-from .placement import assign, usable_cpus
+from .messages import Message, MessageError, NonFiniteError, SensorFrame, decode, encode
+from .placement import Pair, Placement, place, usable_cpus
 from .processes import Child, Exited, kill_quietly, log_tail
 from .scenario import Instance, Plan
 from .service import Interrupted, Outcome, RunError
@@ -52,6 +56,9 @@ log = logging.getLogger("sfl.runtime")
 
 #: the instance name of the supervisor's own liveliness token
 RUN_TOKEN = "@run"
+
+#: the longest path of a Unix socket, with its final NUL (Linux 108, macOS 104: the shorter)
+UNIX_PATH_MAX = 104
 
 #: exception types a module host names in an error reply that mean "cut short, send it again"
 RETRYABLE = frozenset({LinkError.__name__})
@@ -99,6 +106,18 @@ def remote_fault(target: str, tag: str, text: str) -> RunError | Interrupted:
     """The fault of an error reply ``text`` (``ExceptionType: detail``, as the host sends it)."""
     fault = Interrupted if text.partition(":")[0] in RETRYABLE else RunError
     return fault(f"`{target}` failed on `{tag}`: {text}")
+
+
+def lockstep_pairs(plan: Plan) -> tuple[list[Pair], list[str]]:
+    """The run's lockstep pairs (each body worker and its controller process, None when the controller
+    is colocated or there is none) and its other module processes (brain modules)."""
+    by_name = {i.name: i for i in plan.instances}
+    pairs = []
+    for body in plan.bodies:
+        controller = by_name[body].routes.get(SensorFrame.TAG)
+        pairs.append(Pair(body, controller if controller in by_name else None))
+    paired = {name for p in pairs for name in (p.body, p.controller)}
+    return pairs, [i.name for i in plan.instances if i.name not in paired]
 
 
 def hosted_spec(inst: Instance | None) -> dict | None:
@@ -155,8 +174,11 @@ class Supervisor:
         self._drops = bus.Drops(log, "supervisor")
         self._drops.counts = self.dropped
         self._token = None
-        # a core of its own for each body worker and controller process, as lockstep.pin_cpus says
-        self.placement = assign(plan.lockstep_processes, usable_cpus(), plan.scenario.lockstep.pin_cpus)
+        #: each body worker and its controller process on a core of their own, as lockstep.pin_cpus says
+        self.placement: Placement = place(*lockstep_pairs(plan), usable_cpus(), plan.scenario.lockstep.pin_cpus)
+        #: the lockstep links: a folder only this user may enter, and each pair's end in it by instance
+        self.tick_folder: str | None = None
+        self.ticks: dict[str, dict[str, list[str]]] = {}
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:
@@ -176,6 +198,7 @@ class Supervisor:
         )
         (self.run_dir / "logs").mkdir(parents=True, exist_ok=True)
         (self.run_dir / "rerun").mkdir(parents=True, exist_ok=True)
+        self._place()
         if self.endpoint is None:  # others may join (sfl worker): the secret, readable by this user only
             path = self.run_dir / "secret"
             fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
@@ -216,12 +239,35 @@ class Supervisor:
             "tick_timeout": self.plan.scenario.timeouts.tick,
             "spin": self.plan.scenario.lockstep.spin_us * 1e-6,
             "colocated": hosted_spec(colocated),
-            "cpus": self.placement.get(inst.name),
+            "cpus": self.placement.of(inst.name),
+            "tick": self.ticks.get(inst.name),
             "run_dir": str(self.run_dir),
             "secret": self.secret,
             "zenoh_config": self.zenoh_config,
         }
         return spec
+
+    def _place(self) -> None:
+        """Give each body worker and its controller process their lockstep link, and say where
+        every process runs: ``logs/placement.json`` and one line on the terminal."""
+        pairs, _ = lockstep_pairs(self.plan)
+        pairs = [p for p in pairs if p.controller is not None]
+        links = "the mesh (no Unix sockets here)"
+        if pairs and hasattr(socket, "AF_UNIX") and os.name != "nt":  # Zenoh has no unixsock-stream on Windows
+            self.tick_folder = tempfile.mkdtemp(prefix="sfl-")  # 0700: only this user may connect
+            if len(os.fsencode(self.tick_folder)) + len(f"/{len(pairs)}.sock") < UNIX_PATH_MAX:
+                for i, pair in enumerate(pairs):
+                    endpoint = bus.tick_endpoint(self.tick_folder, str(i))
+                    self.ticks[pair.controller] = {"listen": [endpoint]}
+                    self.ticks[pair.body] = {"connect": [endpoint]}
+                links = f"lockstep links in {self.tick_folder}"
+            else:
+                links = f"the mesh (the temporary folder {self.tick_folder} is too long a path for a Unix socket)"
+        placed = self.placement.to_json() | {"lockstep_links": self.ticks, "ticks_on": links}
+        (self.run_dir / "logs" / "placement.json").write_text(json.dumps(placed, indent=1) + "\n")
+        log.info("%s; ticks on %s", self.placement.describe(), links)
+        if pairs:
+            print(f"sfl: {self.placement.describe()}", flush=True)
 
     def listen_for_children(self) -> list[str]:
         host = "127.0.0.1"
@@ -257,6 +303,9 @@ class Supervisor:
         if self.secret_file is not None:
             self.secret_file.unlink(missing_ok=True)
             self.secret_file = None
+        if self.tick_folder is not None:
+            shutil.rmtree(self.tick_folder, ignore_errors=True)
+            self.tick_folder = None
         if self.session is not None:
             self.session.close()
             self.session = None

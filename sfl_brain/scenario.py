@@ -291,14 +291,16 @@ class Lockstep(Strict):
         200.0,
         ge=0,
         le=100_000,
-        description="us the body polls for each command before it sleeps; it measures its ticks and "
-        "polls only while that is faster (0: always sleep)",
+        description="us the body polls for each command before it sleeps, when it may use more than one core "
+        "(pin_cpus never, or nothing pinned); it measures its ticks and polls only while that is faster "
+        "(0: always sleep)",
     )
     pin_cpus: Literal["never", "auto", "always"] = Field(
-        "never",
-        description="a core of its own for each body worker and controller process: never = leave it "
-        "to the OS scheduler, auto = only if a core is left over for the rest of the run, "
-        "always = whenever there are as many cores",
+        "auto",
+        description="auto = each body worker and its controller process share a core of their own and block "
+        "(no polling), brain modules on the other cores, when the run may use more than one core and has "
+        "a core per pair; always = also with more pairs than cores (pairs share cores in turn); "
+        "never = leave every process to the OS scheduler",
     )
 
 

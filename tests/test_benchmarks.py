@@ -31,19 +31,34 @@ def figures(text: str, pattern: str, count: int = 1) -> list[float]:
     return values
 
 
-def test_bus_benchmark_prints_the_framework_against_raw_zenoh():
-    out = bench("bus.py", "--ticks", "400", "--blocks", "4", "--pin", "always")
-    assert "pin always" in out
-    figures(out, r"framework / raw(?: polling)? \(medians, the faster raw pattern\): ([\d.]+)")
-    figures(out, r"median +([\d.]+) us", count=6)  # raw, polling, z_ping/z_pong, by hand, framework, one process
-    figures(out, r"first trial done ([\d.]+) s")
+def test_bus_benchmark_prints_the_floors_bare_zenoh_and_the_framework_side_by_side():
+    out = bench("bus.py", "--ticks", "100", "--repeats", "1", "--busy-repeats", "1", "--block", "50")
+    assert "load average" in out  # how busy the machine was
+    # one process, two pipes, shared memory, bare Zenoh (mesh on two cores and one core, the lockstep link) and the
+    # framework before and now, then four of them beside one busy process
+    figures(out, r"  \S[^\n]*?  +([\d.]+)  \(IQR", count=10 + 4)
+    figures(out, r"framework / bare Zenoh in the same configuration \(lockstep link, one core\): ([\d.]+)")
+    figures(out, r"first trial done ([\d.]+) s", count=2)  # placed and not
 
 
-def test_planar_benchmark_prints_the_trial_ratios_and_the_sweep_speed_ups():
-    out = bench("planar.py", "--repeats", "1", "--grid", "2")
-    figures(out, r"\(c\)/\(b\) = ([\d.]+)")
+def test_planar_benchmark_prints_the_trial_ratios_beside_the_floors_and_the_sweep_speed_ups():
+    out = bench("planar.py", "--repeats", "1", "--busy-repeats", "1", "--grid", "2")
+    assert "load average" in out
+    figures(out, r"\(c\)/\(b\) = ([\d.]+)", count=2)  # alone, and beside one busy process
     figures(out, r"\(b0\)/\(b\) = ([\d.]+)")  # the body before batching, measured beside it
+    figures(out, r"\((?:c-free|c-mesh|c-apart)\)/\(b\) = ([\d.]+)", count=3)
+    # the floors, the last two also beside one busy process
+    figures(out, r"    pipe, both blocking, [^:\n]*: ([\d.]+)")
+    figures(out, r"    shared memory, both spinning[^:\n]*: ([\d.]+)", count=2)
+    figures(out, r"    bare Zenoh, lockstep link[^:\n]*: ([\d.]+)", count=2)
+    figures(out, r"framework / bare Zenoh in the same configuration: ([\d.]+)")
     figures(out, r"speed-up ([\d.]+)x", count=2)
+
+
+def test_humanoid_benchmark_prints_the_trial_over_processes_against_one_process():
+    out = bench("humanoid.py", "--quick")
+    figures(out, r"\(b\)/\(c\) = ([\d.]+)")
+    figures(out, r"\(c\)  CPG \+ body over processes +[\d.]+ ms  \( *([\d.]+)x real time")
 
 
 def test_brain_benchmark_prints_the_cycle_per_trial():

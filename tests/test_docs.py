@@ -44,9 +44,11 @@ def shown_output(command: str) -> str:
 
 
 def output(done) -> str:
-    """What a command printed, as the page shows it (the checkout's path as SHOWN_ROOT, no progress bar)."""
+    """What a command printed, as the page shows it (the checkout's path as SHOWN_ROOT, no progress bar, no
+    lockstep placement line: it names this machine's cores)."""
     text = (done.stdout + done.stderr).replace(str(ROOT), SHOWN_ROOT)
-    return "\n".join(line for line in text.rstrip("\n").splitlines() if "━" not in line)
+    lines = text.rstrip("\n").splitlines()
+    return "\n".join(line for line in lines if "━" not in line and not line.startswith("sfl: lockstep placement"))
 
 
 def test_the_page_shows_each_file_as_it_is():

@@ -200,12 +200,11 @@ def test_set_overrides_are_validated_too():
     assert done.returncode == 2 and "modules.acc.params.shape.0" in done.stderr
 
 
-def test_lockstep_processes_get_a_core_each_only_when_there_are_enough():
-    from sfl_brain.placement import assign
-
+def test_lockstep_processes_are_the_body_workers_and_their_controller_processes():
+    """Where they run is tests/test_placement.py's."""
     quick = SCENARIOS / "quickstart.yaml"
-    assert load(quick).lockstep_processes == ["body", "controller"]  # ACC, vigilance, OFC are not pinned
-    assert load(quick).scenario.lockstep.pin_cpus == "never"  # pinning is the user's call
+    assert load(quick).lockstep_processes == ["body", "controller"]  # ACC, vigilance, OFC exchange no ticks
+    assert load(quick).scenario.lockstep.pin_cpus == "auto"  # each pair on a core of its own
     two = load(quick, ["modules.body.workers=2"]).lockstep_processes
     assert two == ["body.0", "controller.0", "body.1", "controller.1"]
     assert load(quick, ["modules.body.workers=2", "modules.controller.colocate=true"]).lockstep_processes == [
@@ -213,13 +212,6 @@ def test_lockstep_processes_get_a_core_each_only_when_there_are_enough():
         "body.1",
     ]
     assert load(SCENARIOS / "analytic_learn.yaml").lockstep_processes == ["body"]
-    pair = ["body", "controller"]
-    assert assign(pair, [2, 5, 7], "auto") == {"body": [2], "controller": [5]}  # a core left for the rest
-    assert assign(pair, [2, 5], "auto") == {}  # no core left for the brain modules, the viewer...
-    assert assign(pair, [2, 5], "always") == {"body": [2], "controller": [5]}
-    assert assign(pair, [2, 5, 7], "never") == {}
-    assert assign(two, [0, 1], "always") == {}  # four lockstep processes on two cores
-    assert assign(["body"], [3], "always") == {}  # one core: nothing to separate
 
 
 def test_strict_types_keep_what_is_right(write_scenario):

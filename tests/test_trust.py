@@ -37,10 +37,12 @@ def counters(run_dir) -> dict[str, int]:
 
 
 class Stranger:
-    """Everything a peer inside the mesh, without the run secret, can throw at a run."""
+    """Everything a peer inside the mesh, without the run secret, can throw at a run; ``link``: a session
+    of its own on a pair's lockstep link too (this user may connect to it), for frames and commands."""
 
-    def __init__(self, session, run_id: str, instances: list[str]) -> None:
+    def __init__(self, session, run_id: str, instances: list[str], link=None) -> None:
         self.s = session
+        self.link = link
         self.run_id = run_id
         self.instances = instances
         self.rng = np.random.default_rng(0)
@@ -77,9 +79,12 @@ class Stranger:
         for trial_id, tick in ((9999, 0), (0, round_), (round_ % 5, round_ % 300), (-1, -1)):
             for cls, key_ in ((m.SensorFrame, "controller/controller.sensors"), (m.MotorCommand, "body/body.command")):
                 data = self.frame(cls, trial_id, tick, 8 if cls is m.SensorFrame else 4)
-                s.put(f"sfl/{run}/{key_}", data)
-                s.put(f"sfl/{run}/{key_}", data + rng.bytes(8))
-        s.put(f"sfl/{run}/body/body.command", b"")  # the body's own wake-up payload
+                for on in filter(None, (s, self.link)):
+                    on.put(f"sfl/{run}/{key_}", data)
+                    on.put(f"sfl/{run}/{key_}", data + rng.bytes(8))
+                    on.put(f"sfl/{run}/{key_}", rng.bytes(int(rng.integers(0, 64))))
+        for on in filter(None, (s, self.link)):
+            on.put(f"sfl/{run}/body/body.command", b"")  # the body's own wake-up payload
         # forged liveliness tokens: no proof, a wrong proof, module names that exist, a worker, the run's
         forged = [
             bus.alive_key(run, "acc"),
@@ -108,7 +113,10 @@ def test_garbage_on_every_key_of_a_running_run_changes_nothing(tmp_path):
     out = tmp_path / "run"
     instances = ["acc", "vigilance", "ofc", "body", "controller"]
     with listening_run(WALKER, out, *WALKER_SETS, modules=5) as run:
-        stranger = Stranger(run.session, run.run_id, instances)
+        # the body and its controller tick on a link of their own, off the mesh: the stranger joins it too
+        links = json.loads((out / "logs" / "placement.json").read_text())["lockstep_links"]
+        link = bus.open_tick_session([], links["controller"]["listen"])
+        stranger = Stranger(run.session, run.run_id, instances, link)
         rounds = 0
         try:
             while run.proc.poll() is None:
@@ -120,6 +128,7 @@ def test_garbage_on_every_key_of_a_running_run_changes_nothing(tmp_path):
                     pass
         finally:
             stranger.close()
+            link.close()
         stderr = run.proc.stderr.read()
     assert run.proc.returncode == 0, stderr
     assert rounds >= 3

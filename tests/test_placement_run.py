@@ -1,0 +1,118 @@
+"""A run places its lockstep pair and says so: real processes, the placement the OS reports, the link."""
+
+from __future__ import annotations
+
+import json
+import os
+
+import pytest
+
+from sfl_brain.local import run_local
+from sfl_brain.placement import Pair, place, usable_cpus
+from sfl_brain.records import read_records
+from sfl_brain.scenario import load
+
+from .conftest import SCENARIOS, sfl_run
+
+QUICK = SCENARIOS / "quickstart.yaml"
+SETS = ("protocol.trials=6", "record.body_every=0", "modules.body.params.duration=3")
+VOLATILE = {"wall_ms", "worker"}
+
+
+def stable(rows):
+    return [{k: v for k, v in r.items() if k not in VOLATILE} for r in rows]
+
+
+def logs(out) -> dict[str, str]:
+    return {p.stem: p.read_text() for p in (out / "logs").glob("*.log")}
+
+
+def test_a_run_pins_its_pair_to_one_core_logs_it_and_ticks_on_its_lockstep_link(tmp_path):
+    out = tmp_path / "run"
+    done = sfl_run(QUICK, out, *SETS)
+    assert done.returncode == 0, done.stderr
+    expected = place([Pair("body", "controller")], ["acc", "vigilance", "ofc"], usable_cpus(), "auto")
+    assert f"sfl: {expected.describe()}" in done.stdout.splitlines()  # the line a user sees
+    placed = json.loads((out / "logs" / "placement.json").read_text())
+    assert placed["cores"] == {name: list(cores) for name, cores in expected.cores.items()}
+    assert placed["mode"] == "auto" and placed["usable_cores"] == usable_cpus()
+    text = logs(out)
+    if len(usable_cpus()) >= 2:  # as the OS says: both on the last usable core, the brain modules elsewhere
+        core = usable_cpus()[-1]
+        assert f"pinned to cores [{core}]" in text["body"] and f"pinned to cores [{core}]" in text["controller"]
+        assert f"pinned to cores {usable_cpus()[:-1]}" in text["acc"]
+    # the frames and commands went over the pair's own link: the controller listens, the body connects
+    link = placed["lockstep_links"]["controller"]["listen"][0]
+    assert placed["lockstep_links"]["body"] == {"connect": [link]} and link.startswith("unixsock-stream/")
+    assert f"lockstep link (lowlatency): listening on {link}" in text["controller"]
+    assert f"lockstep link (lowlatency): connecting to {link}" in text["body"]
+    assert not os.path.exists(os.path.dirname(link.removeprefix("unixsock-stream/")))  # removed with the run
+    # over processes, the same trials as in one process
+    assert stable(read_records(out)) == stable(run_local(load(QUICK, list(SETS))))
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="no CPU affinity on this OS")
+def test_a_run_limited_to_one_core_by_taskset_pins_nothing(tmp_path):
+    out = tmp_path / "run"
+    core = usable_cpus()[-1]
+    done = sfl_run(QUICK, out, *SETS, preexec_fn=lambda: os.sched_setaffinity(0, {core}))
+    assert done.returncode == 0, done.stderr
+    line = f"sfl: lockstep placement (lockstep.pin_cpus: auto, usable cores {core}): nothing pinned: one usable core"
+    assert line in done.stdout.splitlines()
+    assert all("pinned to cores" not in text for text in logs(out).values())
+    assert json.loads((out / "logs" / "placement.json").read_text())["cores"] == {}
+
+
+def test_on_its_link_the_body_takes_only_its_trials_command_and_counts_the_rest(tmp_path):
+    """The body's end of a lockstep link connects to its controller only (nothing else can reach it), and even
+    from there it takes only the command with this trial's nonce, trial and tick: the rest is counted and dropped."""
+    import threading
+
+    import numpy as np
+    import zenoh
+
+    from sfl_brain import bus
+    from sfl_brain.host import BusLink
+    from sfl_brain.messages import Ack, ControllerReset, MotorCommand, SensorFrame, decode, encode
+
+    endpoint = bus.tick_endpoint(tmp_path, "0")
+    mesh = bus.open_session([bus.free_endpoint()], [])
+    controller_end = bus.open_tick_session([endpoint], [])
+    body_end = bus.open_tick_session([], [endpoint])
+    seal = bus.Seal(None)
+
+    def reset(query):  # the controller's reset, as its host answers it
+        nonce, body = seal.open_request(str(query.key_expr), query.payload.to_bytes())
+        assert type(decode(body)) is ControllerReset
+        query.reply(query.key_expr, seal.seal_reply(nonce, encode(Ack())))
+        query.drop()
+
+    queryable = mesh.declare_queryable(bus.key("r", "controller", ControllerReset.TAG), reset)
+    frames = controller_end.declare_subscriber(
+        bus.key("r", "controller", SensorFrame.TAG), zenoh.handlers.RingChannel(8)
+    )
+    commands = controller_end.declare_publisher(bus.key("r", "body", MotorCommand.TAG))
+
+    def answer():  # garbage, another trial's nonce, a stale tick, then the command
+        data = frames.recv().payload.to_bytes()
+        nonce, frame = data[-8:], decode(data[:-8])
+
+        def command(trial, tick):
+            return encode(MotorCommand(trial_id=trial, tick=tick, values=np.ones(2)))
+
+        for payload in (b"\x00garbage", command(7, 0) + bytes(8), command(frame.trial_id, 5) + nonce, b"\xc1" + nonce):
+            commands.put(payload)
+        commands.put(command(frame.trial_id, frame.tick) + nonce)
+
+    link = BusLink(mesh, "r", "body", "controller", timeout=10.0, ticks=body_end)
+    try:
+        link.reset(ControllerReset(trial_id=7, seed=0, params={}, sensors=["a"], commands=["b", "c"]))
+        threading.Thread(target=answer, daemon=True).start()
+        got = link.step(SensorFrame(trial_id=7, tick=0, values=np.zeros(1)))
+        assert (got.trial_id, got.tick, list(got.values)) == (7, 0, [1.0, 1.0])
+        assert link.drops.counts == {"foreign": 2, "stale": 1, "malformed": 1}
+    finally:
+        link.close()
+        queryable.undeclare()
+        for session in (body_end, controller_end, mesh):
+            session.close()
