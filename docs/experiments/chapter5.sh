@@ -8,7 +8,7 @@
 #   E5.3       maps per slope (flat, up and down 10 deg, adaptive vigilance, QARL), and walking flat -> uphill and
 #              downhill -> flat with and without switching between the learnt neurons (scenarios/e5_switch.yaml)
 # Two runs at a time (JOBS, default 2: learning is one trial after another, so a run keeps one core busy). A run
-# folder that already holds a completed run is kept (re-running resumes). TRIALS sets E5.2/E5.3's budget (default 150:
+# folder that already holds a completed run is kept (re-running resumes). TRIALS sets E5.2/E5.3's budget (default 100:
 # the thesis reads N_s/N_f after 100 trials; E5.1 keeps the thesis's 500).
 #   bash docs/experiments/chapter5.sh
 set -euo pipefail
@@ -16,7 +16,7 @@ cd "$(dirname "$0")/../.."
 OUT=${OUT:-runs/chapter5}
 RESULTS=${RESULTS:-docs/results/chapter5}
 JOBS=${JOBS:-2}
-TRIALS=${TRIALS:-150}
+TRIALS=${TRIALS:-100}
 mkdir -p "$OUT" "$RESULTS"
 
 source docs/experiments/_once.sh  # once DIR COMMAND...: a completed run folder is kept
