@@ -31,10 +31,11 @@ class Events:
     texts: list[str]
 
 
-def _rows(path: Path, entities: set[str]):
+def _rows(path: Path, entities: set[str] | None):
+    """(entity, record batch, column names) of every per-trial chunk at ``entities`` (None: at every entity)."""
     for chunk in RrdReader(Path(path)).stream().to_chunks():
         entity = str(chunk.entity_path).lstrip("/")
-        if chunk.is_static or entity not in entities:
+        if chunk.is_static or (entities is not None and entity not in entities):
             continue
         batch = chunk.to_record_batch()
         names = batch.schema.names
@@ -100,3 +101,8 @@ def read_labels(path: Path, entities: list[str]) -> dict[str, str]:
             if names and names[0]:
                 out[entity] = str(names[0][0])
     return out
+
+
+def read_entity_paths(path: Path) -> set[str]:
+    """The entity paths (without the leading ``/``) the recording logged per-trial samples at, on ``sim_time``."""
+    return {entity for entity, _, _ in _rows(path, None)}

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import matplotlib
@@ -229,6 +230,11 @@ def conditions_section(scenario: dict, run_dirs: list[Path], left_out: list[str]
             lines += poincare_section(t, run_dirs, out, f"{name}_poincare{k or ''}")
         elif analysis["kind"] == "trace":
             lines += trace_section(t, run_dirs, analysis, out, f"{name}_trace{k or ''}")
+        elif analysis["kind"] == "pattern_space":
+            from .scenario import PatternSpaceAnalysis  # its defaults (the run folder keeps the file as written)
+
+            given = PatternSpaceAnalysis.model_validate(analysis).model_dump()
+            lines += pattern_space_section(t, run_dirs, given, out, f"{name}_pattern_space{k or ''}")
     if left_out:
         lines += ["Left out (did not complete):", ""] + [f"- {text}" for text in left_out] + [""]
     return lines
@@ -255,6 +261,29 @@ def _logged(t: Trials, run_dirs: list[Path], entities: list[str], events: list[s
         marks = read_events(rrd, ["body/trial/events", *events])
         starts = {trial: float(e.times[0]) for trial, e in marks["body/trial/events"].items()}
         yield run, rows, read_series(rrd, entities), marks, starts
+
+
+def _pick(
+    t: Trials, run_dirs, analysis: dict, names: list[str], event_names: list[str], trials: int, required=None
+) -> list:
+    """The first ``trials`` logged trials of each condition that match ``analysis['where']`` and hold any of the
+    series ``names`` (all of ``required`` if given), in condition order: (row, start, {name: Series}, [(event times
+    from the start, texts)])."""
+    picked: dict[str, list] = {c: [] for c in t.conditions}
+    for _, rows, series, marks, starts in _logged(t, run_dirs, names, event_names):
+        for trial in sorted(rows):
+            row = rows[trial]
+            mine = picked.setdefault(row["condition"], [])
+            held = all(trial in series[n] for n in required) if required else any(trial in series[n] for n in names)
+            if len(mine) >= trials or not held:
+                continue
+            if any(row.get(k) != v for k, v in (analysis.get("where") or {}).items()):
+                continue
+            start = starts.get(trial, 0.0)
+            found = {n: series[n][trial] for n in names if trial in series[n]}
+            happened = [(e.times - start, e.texts) for n in event_names if (e := marks[n].get(trial)) is not None]
+            mine.append((row, start, found, happened))
+    return [item for items in picked.values() for item in items]
 
 
 def _describe(row: dict, keys: list[str]) -> str:
@@ -359,20 +388,7 @@ def trace_section(t: Trials, run_dirs: list[Path], analysis: dict, out: Path, st
     """The recorded series of the first ``trials`` logged trials of each condition, one panel per series, the
     events marked as vertical lines (their text in the table below the figure)."""
     names, event_names = list(analysis["series"]), list(analysis.get("events") or [])
-    picked: dict[str, list] = {c: [] for c in t.conditions}
-    for _, rows, series, marks, starts in _logged(t, run_dirs, names, event_names):
-        for trial in sorted(rows):
-            row = rows[trial]
-            mine = picked.setdefault(row["condition"], [])
-            if len(mine) >= analysis.get("trials", 2) or not any(trial in series[n] for n in names):
-                continue
-            if any(row.get(k) != v for k, v in (analysis.get("where") or {}).items()):
-                continue
-            start = starts.get(trial, 0.0)
-            found = {n: series[n][trial] for n in names if trial in series[n]}
-            happened = [(e.times - start, e.texts) for n in event_names if (e := marks[n].get(trial)) is not None]
-            mine.append((row, start, found, happened))
-    drawn = [item for items in picked.values() for item in items]
+    drawn = _pick(t, run_dirs, analysis, names, event_names, analysis.get("trials", 2))
     if not drawn:
         return ["### Recorded traces", "", f"No logged trial holds {names}.", ""]
     fig, axes = plt.subplots(len(names), 1, figsize=(10, 2.6 * len(names) + 0.8), sharex=True, squeeze=False)
@@ -404,3 +420,283 @@ def trace_section(t: Trials, run_dirs: list[Path], analysis: dict, out: Path, st
     plt.close(fig)
     lines = ["### Recorded traces", "", f"![]({name})", ""]
     return lines + (table + [""] if len(table) > 2 else [])
+
+
+# ------------------------------------------------------------------------------------------------ the pattern space
+#: where the pattern-space figure puts an energy of 0 (a joint's RG held perfectly still, a plateau): mV^2/s (model)
+ENERGY_FLOOR = 1e-6
+#: the axis of the pattern space (RG potentials in the model's mV)
+ENERGY_LABEL = r"log$_{10}$ E$_{RG}$, mV$^2$/s"
+#: s of the trial drawn before the push
+SHOWN_BEFORE = 3.0
+#: the cycles before the push whose energies make the band of the gait's oscillation in the figure
+BAND_CYCLES = 3
+
+
+def _switched_to(scenario: dict, module: str, condition: str) -> dict[str, str]:
+    """The pattern each joint switches to under ``condition`` (the switch preset its ``<module>.switch`` names, or
+    the module's own ``switch``), by name or as (sigma_s, sigma_f); {} when it does not switch."""
+    choice = (scenario["protocol"]["conditions"].get(condition) or {}).get(f"{module}.switch")
+    params = (scenario.get("modules", {}).get(module) or {}).get("params") or {}
+    if choice is None:
+        preset = params.get("switch") or {}
+        preset = preset if preset.get("trigger", "none") != "none" else {}
+    else:
+        preset = {} if choice == "none" else (params.get("switches") or {}).get(choice) or {}
+    return {
+        joint: p if isinstance(p, str) else f"(sigma_s {p['sigma_s']:g}, sigma_f {p['sigma_f']:g})"
+        for joint, p in (preset.get("joints") or {}).items()
+    }
+
+
+@dataclass
+class JointPath:
+    """One joint's path in the pattern space on one trial: time in the trial (s), E_RG over the window before it
+    (model mV^2 / s; NaN before one window has passed), and the same (4.15) of the measured joint angle (rad^2 / s,
+    at its own sample times; None when the body logged no angle)."""
+
+    time: np.ndarray
+    energy: np.ndarray
+    angle_time: np.ndarray | None
+    angle_energy: np.ndarray | None
+
+
+def value_at(time: np.ndarray, values: np.ndarray, when: float) -> float:
+    """The value at the last sample at or before ``when`` (NaN past the trace's end or before its start)."""
+    if when > time[-1] + 1e-9 or when < time[0] - 1e-9:
+        return math.nan
+    return float(values[max(0, int(np.searchsorted(time, when + 1e-9)) - 1)])
+
+
+def pattern_space_paths(t: Trials, run_dirs: list[Path], analysis: dict) -> tuple[list[str], list]:
+    """The data of the pattern-space figure: (joints, [(row, {joint: JointPath}, push time in the trial (s) or
+    None, [(event times, texts)])]) for the first ``trials`` logged trials of each condition matching ``where``.
+
+    E_RG(t) = (4.15) L1296 of V_E - V_F, the joint's two RG cells' potentials (the RG layer's output, as the MN
+    layer's MN_E - MN_F makes the joint's command), over the ``window`` s before t (``patterns.windowed_energy``),
+    from the samples the recording holds (``record.signals_hz``). The push time is the first event of
+    ``events`` in the trial. Raises ValueError, naming what the recording has, for a joint without RG series."""
+    from .modules.cpg.patterns import windowed_energy
+    from .recorded import read_entity_paths
+    from .registry import nearest
+
+    module, window = analysis.get("module", "controller"), float(analysis["window"])
+    runs = [Path(r) for r in run_dirs if (Path(r) / "recording.rrd").exists()]
+    prefix, suffix = f"{module}/neurons/", "/E/RG_V"
+    held = read_entity_paths(runs[0] / "recording.rrd") if runs else set()
+    recorded = sorted(e[len(prefix) : -len(suffix)] for e in held if e.startswith(prefix) and e.endswith(suffix))
+    joints = list(analysis.get("joints") or recorded)
+    for joint in joints:
+        if runs and joint not in recorded:
+            hint = nearest(joint, recorded)
+            raise ValueError(
+                f"pattern_space: no RG potentials of joint {joint!r} in the recording ({prefix}{joint}/E|F/RG_V); "
+                f"it holds the RGs of {recorded or 'no joint (is record.neurons true?)'}"
+                + (f" (did you mean {hint!r}?)" if hint else "")
+            )
+    rg = {j: (f"{prefix}{j}/E/RG_V", f"{prefix}{j}/F/RG_V") for j in joints}
+    angles = {j: f"body/joints/{j}" for j in joints}
+    needed = [n for pair in rg.values() for n in pair]
+    event_names = list(analysis.get("events") or [])
+    picked = _pick(
+        t, run_dirs, analysis, needed + list(angles.values()), event_names, analysis.get("trials", 1), needed
+    )
+    out = []
+    for row, start, found, happened in picked:
+        paths = {}
+        for joint, (e_name, f_name) in rg.items():
+            e, f = found[e_name], found[f_name]
+            n = min(len(e.times), len(f.times))
+            time = e.times[:n] - start
+            dt = float(np.median(np.diff(time))) if n > 1 else math.nan
+            energy = windowed_energy(e.values[:n] - f.values[:n], dt, window) if n > 1 else np.full(n, np.nan)
+            angle = found.get(angles[joint])
+            if angle is not None and len(angle.times) > 1:
+                a_time = angle.times - start
+                a_dt = float(np.median(np.diff(a_time)))
+                a_energy = windowed_energy(np.radians(angle.values), a_dt, window)  # logged in deg
+            else:
+                a_time = a_energy = None
+            paths[joint] = JointPath(time, energy, a_time, a_energy)
+        firsts = [float(times[0]) for times, _ in happened if len(times)]
+        out.append((row, paths, min(firsts) if firsts else None, happened))
+    return joints, out
+
+
+def _to(targets: dict[str, dict[str, str]], joint: str) -> list[str]:
+    """The patterns ``joint`` switches to under any condition (``targets``: condition -> joint -> pattern)."""
+    return sorted({switched[joint] for switched in targets.values() if joint in switched})
+
+
+def _log(energy) -> np.ndarray:
+    return np.log10(np.maximum(np.asarray(energy, dtype=float), ENERGY_FLOOR))
+
+
+def pattern_space_section(t: Trials, run_dirs: list[Path], analysis: dict, out: Path, stem: str) -> list[str]:
+    """Fig. 4.23 (L1430-1435): each joint's RG energy over one gait cycle against time, per condition, and every
+    joint's point before the push and ``after`` s later on its own log-energy axis (the pattern space, L1298);
+    two tables of the points (the RG's energy, and (4.15) of the measured joint angle)."""
+    window, after = float(analysis["window"]), float(analysis.get("after", 2.0))
+    try:
+        joints, paths = pattern_space_paths(t, run_dirs, analysis)
+    except ValueError as exc:
+        return ["### The pattern space (Fig. 4.23)", "", str(exc), ""]
+    if not paths:
+        where = analysis.get("where") or {}
+        return [
+            "### The pattern space (Fig. 4.23)",
+            "",
+            f"No logged trial{f' with {where}' if where else ''} holds the RG potentials of {joints}.",
+            "",
+        ]
+    module = analysis.get("module", "controller")
+    targets = {c: _switched_to(t.scenario, module, c) for c in t.conditions}
+    columns, head = [], []
+    for row, path, push, _ in paths:
+        end = float(row.get("m_time", max(p.time[-1] for p in path.values())))  # the body's trial time
+        ended = "fell" if row.get("m_fell") else "ended"
+        head.append(f"{row['condition']}, trial {row['trial']} ({ended} at {end:.1f} s)")
+        columns.append((row, path, push, end))
+    name = _pattern_space_figure(t, joints, paths, targets, window, after, out, stem)
+    sampled = float(np.median(np.diff(next(iter(paths[0][1].values())).time)))
+    pushes = sorted({f"{p:.2f}" for _, _, p, _ in paths if p is not None})
+    lines = [
+        "### The pattern space (Fig. 4.23, L1430-1435)",
+        "",
+        f"Each joint's pattern as its energy at the rhythm generation layer: (4.15) L1296, E = integral of "
+        f"(d theta / dt)^2 dt with theta = V_E - V_F (the joint's two RG cells' potentials, model mV, sampled every "
+        f"{sampled * 1000:.0f} ms), over a sliding window of {window:g} s (one gait cycle), on a log axis per joint "
+        f"(L1294-1298; E = 0 drawn at {ENERGY_FLOOR:g}). Before: the window ending at the trial's first event "
+        f"({', '.join(analysis['events'])}: the push, at {', '.join(pushes) or '-'} s); after: the window ending "
+        f"{after:g} s "
+        "later ('-': the trial ended first). Each cell: log10 E before -> after.",
+        "",
+        f"![]({name})",
+        "",
+    ]
+    tables = (("RG layer, log10 E_RG (model mV^2/s)", False), ("joint angle (4.15), log10 E (rad^2/s)", True))
+    for title, angle in tables:
+        lines += [f"{title}:", "", "| joint | switched to | " + " | ".join(head) + " |", "|" + "---|" * (len(head) + 2)]
+        for joint in joints:
+            cells = [joint, ", ".join(_to(targets, joint)) or "-"]
+            for _row, path, push, _end in columns:
+                p = path[joint]
+                time, energy = (p.angle_time, p.angle_energy) if angle else (p.time, p.energy)
+                if push is None or time is None:
+                    cells.append("-")
+                    continue
+                before, later = (value_at(time, energy, push), value_at(time, energy, push + after))
+                text = [f"{float(_log(v)):.2f}" if not math.isnan(v) else "-" for v in (before, later)]
+                cells.append(" -> ".join(text))
+            lines.append("| " + " | ".join(cells) + " |")
+        lines.append("")
+    return lines
+
+
+def _pattern_space_figure(t: Trials, joints, paths, targets, window: float, after: float, out: Path, stem: str) -> str:
+    ncols = 3 if len(joints) > 4 else max(1, len(joints))
+    nrows = math.ceil(len(joints) / ncols)
+    fig = plt.figure(figsize=(4.4 * ncols, 2.3 * nrows + 4.2))
+    grid = fig.add_gridspec(nrows + 1, ncols, height_ratios=[1.0] * nrows + [1.7])
+    colors = {c: plt.cm.tab10.colors[k % 10] for k, c in enumerate(t.conditions)}
+    styles = ["-", "--", ":", "-."]  # one per condition, so that conditions whose RGs coincide all show
+    floor = math.log10(ENERGY_FLOOR)
+    keyed = []
+    for row, path, push, happened in paths:
+        k = t.conditions.index(row["condition"]) if row["condition"] in t.conditions else 0
+        keyed.append((row, path, push, happened, colors[row["condition"]], styles[k % len(styles)]))
+    top = max(float(np.nanmax(_log(p.energy))) for _, path, *_ in paths for p in path.values())
+    share = None
+    for j, joint in enumerate(joints):
+        ax = fig.add_subplot(grid[j // ncols, j % ncols], sharex=share, sharey=share)
+        share = share or ax
+        band = [
+            _log(p.energy[(p.time > push - BAND_CYCLES * window) & (p.time <= push)])
+            for _, path, push, *_ in keyed
+            if push is not None
+            for p in [path[joint]]
+        ]
+        band = np.concatenate(band) if band else np.empty(0)
+        band = band[np.isfinite(band)]
+        if band.size:
+            label = f"the gait's range, {BAND_CYCLES} cycles before the push"
+            ax.axhspan(band.min(), band.max(), color="0.85", zorder=0, label=label)
+        ax.axhline(floor, color="0.5", ls=":", lw=0.8, label=f"E = 0 (drawn at {ENERGY_FLOOR:g})")
+        for row, path, _push, happened, color, style in keyed:
+            p = path[joint]
+            ax.plot(
+                p.time,
+                _log(p.energy),
+                color=color,
+                ls=style,
+                lw=1.5,
+                label=f"{row['condition']} (trial {row['trial']})",
+            )
+            for times, _texts in happened:
+                for when in times:
+                    ax.axvline(when, color=color, ls="--", lw=0.6, alpha=0.7)
+        to = _to(targets, joint)
+        ax.set_title(f"{joint}" + (f" -> {', '.join(to)}" if to else ""), fontsize=10)
+        ax.set_ylim(floor - 0.5, top + 0.5)
+        ax.grid(alpha=0.3)
+        if j % ncols == 0:
+            ax.set_ylabel(ENERGY_LABEL, fontsize=9)
+        if j // ncols == nrows - 1 or j + ncols >= len(joints):
+            ax.set_xlabel("time in the trial, s", fontsize=9)
+        if j == 0:
+            handles, labels = ax.get_legend_handles_labels()
+    pushes = [push for _, _, push, _ in paths if push is not None]
+    if pushes:  # from a little before the push: the switch, not the start
+        share.set_xlim(left=max(0.0, min(pushes) - SHOWN_BEFORE))
+    space = fig.add_subplot(grid[nrows, :])
+    x = np.arange(len(joints))
+    for row, path, push, _, color, style in keyed:
+        if push is None:
+            continue
+        before = [value_at(path[j].time, path[j].energy, push) for j in joints]
+        later = [value_at(path[j].time, path[j].energy, push + after) for j in joints]
+        space.plot(
+            x,
+            _log(before),
+            color=color,
+            ls=style,
+            lw=0.8,
+            marker="o",
+            mfc="none",
+            alpha=0.6,
+            label=f"{row['condition']} (trial {row['trial']}): before, the cycle ending at the push",
+        )
+        if not all(math.isnan(v) for v in later):
+            space.plot(
+                x,
+                _log(later),
+                color=color,
+                ls=style,
+                lw=1.6,
+                marker="s",
+                label=f"{row['condition']} (trial {row['trial']}): {after:g} s after the push",
+            )
+    space.axhline(floor, color="0.5", ls=":", lw=0.8)
+    ticks = [j + (f"\n-> {', '.join(_to(targets, j))}" if _to(targets, j) else "") for j in joints]
+    space.set_xticks(x, ticks, fontsize=8, rotation=30, ha="right", rotation_mode="anchor")
+    space.set_ylabel(ENERGY_LABEL, fontsize=10)
+    space.set_ylim(floor - 0.5, top + 0.5)
+    space.set_title(
+        f"the pattern space: one log-energy axis per joint (L1294-1298), the point before the push and {after:g} s "
+        "after",
+        fontsize=10,
+    )
+    space.grid(alpha=0.3)
+    space.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.0, 0.5))
+    fig.legend(handles, labels, fontsize=8, loc="upper center", ncol=min(len(labels), 4), bbox_to_anchor=(0.5, 1.0))
+    fig.suptitle(
+        f"{t.scenario['name']}: energy (4.15) of each joint's RG output V_E - V_F over the last {window:g} s (one gait "
+        f"cycle), from {SHOWN_BEFORE:g} s before the push; dashed verticals: the push and the switch",
+        fontsize=11,
+        y=1.03,
+    )
+    fig.tight_layout(rect=(0, 0, 1, 0.97))
+    name = f"{stem}.png"
+    fig.savefig(out / name, dpi=100, bbox_inches="tight")
+    plt.close(fig)
+    return name

@@ -23,6 +23,7 @@ import json
 import math
 import os
 import re
+import typing
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -136,7 +137,29 @@ class TraceAnalysis(Strict):
     where: dict[str, TrialValue] = Field({}, description="only logged trials with these grid values")
 
 
-Analysis = Annotated[PoincareAnalysis | TraceAnalysis, Field(discriminator="kind")]
+class PatternSpaceAnalysis(Strict):
+    """``sfl report``: the trajectory of each joint in the pattern space of L1430-1435 (Fig. 4.23): the energy (4.15)
+    of the joint's rhythm generator, its two cells' potential difference V_E - V_F, over a sliding ``window`` (one
+    gait cycle) against time, on the first logged trials of each condition; and the point of every joint before the
+    first marked event (the push) and ``after`` s later, one axis per joint (L1298). Needs the controller's neuron
+    activities in the recording (``record.neurons``, at ``<module>/neurons/<joint>/<E|F>/RG_V``)."""
+
+    kind: Literal["pattern_space"]
+    window: float = Field(gt=0, le=60, description="s: the energy's sliding window, one gait cycle")
+    after: float = Field(2.0, gt=0, le=600, description="s after the first marked event: where the after point is")
+    joints: list[str] = Field([], max_length=64, description="joints drawn, in this order; [] = every recorded RG")
+    module: str = Field("controller", description="the scenario's module whose RG neurons are read")
+    events: list[str] = Field(
+        ["body/events", "controller/events/pattern_switch"],
+        min_length=1,
+        max_length=8,
+        description="event entity paths marked on it; the first in a trial is the push the points are taken about",
+    )
+    trials: int = Field(1, ge=1, le=20, description="logged trials drawn per condition")
+    where: dict[str, TrialValue] = Field({}, description="only logged trials with these grid values")
+
+
+Analysis = Annotated[PoincareAnalysis | TraceAnalysis | PatternSpaceAnalysis, Field(discriminator="kind")]
 
 
 class ConditionsProtocol(Strict):
@@ -234,6 +257,12 @@ def conditions_problems(proto: ConditionsProtocol) -> list[Problem]:
             )
         if target in given:
             out.append(Problem(f"protocol.follow.{target}", "is set by the grid or a condition already"))
+    for i, analysis in enumerate(proto.analyses):  # a value not in the grid is allowed: a cut-down run draws none
+        for key in getattr(analysis, "where", {}):
+            if key not in proto.grid:
+                grid = list(proto.grid)
+                path = f"protocol.analyses.{i}.where.{key}"
+                out.append(Problem(path, f"expected a key of the grid {grid}; got {key!r}", nearest(key, grid)))
     if proto.trials > MAX_CONDITION_TRIALS:
         out.append(
             Problem(
@@ -391,43 +420,44 @@ def _unquoted(given: Any, kind: str) -> str | None:
     return given.strip() if math.isfinite(number) else None
 
 
+def _models_of(annotation) -> list[type[BaseModel]]:
+    """The models an annotation holds: itself, or those inside a list, dict, union or Annotated."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return [annotation]
+    return [m for arg in typing.get_args(annotation) for m in _models_of(arg)]
+
+
 def _fields_at(model: type[BaseModel], loc: tuple) -> list[str]:
-    """Valid keys at ``loc`` inside ``model`` (for did-you-mean on unknown keys)."""
+    """Valid keys at ``loc`` inside ``model`` (for did-you-mean on unknown keys). ``loc`` keeps the kind tags of
+    discriminated unions (``protocol.conditions.analyses.0.trace``), which choose the branch; without one, the
+    keys of every branch."""
     current: Any = model
     for part in loc:
         if isinstance(current, type) and issubclass(current, BaseModel):
             f = current.model_fields.get(str(part))
             if f is None:
-                # discriminated union branch names (e.g. protocol 'learn') appear in loc
                 return []
             current = f.annotation
-        else:
-            args = getattr(current, "__args__", ())
-            models = [a for a in args if isinstance(a, type) and issubclass(a, BaseModel)]
-            branch = next((a for a in models if str(part) in a.model_fields), None)
-            if branch is None:
-                branch = next(
-                    (
-                        a
-                        for a in models
-                        if a.model_fields.get("kind") is not None
-                        and str(part) in str(a.model_fields["kind"].annotation)
-                    ),
-                    None,
-                )
-                if branch is not None:
-                    current = branch
-                    continue
-                if models:  # a list index or a dict key: the item's model
-                    current = models[0]
-                continue
-            current = branch.model_fields[str(part)].annotation
-    while not (isinstance(current, type) and issubclass(current, BaseModel)):
-        args = [a for a in getattr(current, "__args__", ()) if isinstance(a, type) and issubclass(a, BaseModel)]
-        if not args:
-            return []
-        current = args[0]
-    return list(current.model_fields)
+            continue
+        models = _models_of(current)
+        tagged = [
+            m
+            for m in models
+            if "kind" in m.model_fields and str(part) in typing.get_args(m.model_fields["kind"].annotation)
+        ]
+        named = [m for m in models if str(part) in m.model_fields]
+        if tagged:  # a discriminated union's kind tag
+            current = tagged[0]
+        elif named:
+            current = named[0].model_fields[str(part)].annotation
+        elif len(models) == 1:  # a list index or a dict key: the item's model
+            current = models[0]
+    models = _models_of(current)
+    return (
+        sorted({name for m in models for name in m.model_fields})
+        if len(models) > 1
+        else (list(models[0].model_fields) if models else [])
+    )
 
 
 #: parts pydantic inserts into an error's location: validators and unions (not keys of the file)
@@ -448,7 +478,9 @@ def _clean_loc(loc: tuple, kind: str) -> tuple:
             continue
         if len(out) == 1 and out[0] == "protocol" and part in ("learn", "sweep", "exploit", "conditions"):
             continue
-        if len(out) >= 2 and out[-2] == "analyses" and part in ("poincare", "trace"):  # an analysis's kind tag
+        if (
+            len(out) >= 2 and out[-2] == "analyses" and part in ("poincare", "trace", "pattern_space")
+        ):  # an analysis's kind tag
             continue
         out.append(part)
     if kind in EXPECTED and len(out) > 1 and out[-1] in _UNION_MEMBERS:
@@ -468,7 +500,8 @@ def problems_from(exc: ValidationError, model: type[BaseModel], prefix: tuple = 
             type_errors[path].append(kind)
             continue
         if kind == "extra_forbidden":
-            valid = _fields_at(model, clean[:-1])
+            tagged = tuple(p for p in err["loc"] if not (isinstance(p, str) and _SCHEMA_PART.match(p)))
+            valid = _fields_at(model, tagged[:-1])
             out.append(Problem(path, f"unknown key; expected one of {sorted(valid)}", nearest(str(clean[-1]), valid)))
         elif kind == "missing":
             out.append(Problem(path, "required key is missing"))
@@ -1180,6 +1213,14 @@ def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
     if kind == "conditions":  # a conditions protocol's trial parameters, as the scenario's own conditions
         proto = scenario.protocol
         problems += conditions_problems(proto)
+        for i, analysis in enumerate(proto.analyses):
+            if analysis.kind == "pattern_space" and not scenario.record.neurons:
+                problems.append(
+                    Problem(
+                        f"protocol.analyses.{i}",
+                        "pattern_space reads the controller's RG potentials: expected record.neurons: true; got false",
+                    )
+                )
         for name, values in proto.conditions.items():
             targets += [(f"protocol.conditions.{name}.{k}", k, (v,)) for k, v in values.items()]
         targets += [(f"protocol.grid.{k}", k, tuple(v)) for k, v in proto.grid.items()]

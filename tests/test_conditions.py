@@ -8,11 +8,13 @@ import math
 
 import pyarrow.parquet as pq
 import pytest
+import yaml
 from rerun.chunk import RrdReader
 
 from sfl_brain import scenario as sc
 from sfl_brain.protocols import condition_cases, repeat_seed
-from sfl_brain.report_conditions import fisher_exact, mcnemar_exact, wilson
+from sfl_brain.report_conditions import Trials, fisher_exact, mcnemar_exact, pattern_space_paths, value_at, wilson
+from sfl_brain.scenario import PatternSpaceAnalysis
 
 from .conftest import SCENARIOS, sfl, sfl_run
 
@@ -63,6 +65,31 @@ def test_cases_run_every_condition_point_and_repeat_and_pair_starts_by_repeat():
         (("compare: [[near, far]]", "compare: [[near, near]]"), "protocol.compare.0: expected two different"),
         (("repeats: 2", "repeats: 0"), "protocol.repeats: input should be greater than or equal to 1; got 0"),
         (("  repeats: 2", "  repeats: 2\n  judge: alive"), "protocol.judge: expected one of 'success' or 'upright'"),
+        (
+            ("  repeats: 2", "  repeats: 2\n  analyses: [{kind: pattern_space, window: 0}]"),
+            "protocol.analyses.0.window: input should be greater than 0; got 0",
+        ),
+        (
+            ("  repeats: 2", "  repeats: 2\n  analyses: [{kind: pattern_space, windw: 0.5}]"),
+            "protocol.analyses.0.windw: unknown key; expected one of ['after', 'events', 'joints', 'kind', 'module', "
+            "'trials', 'where', 'window'] (did you mean `window`?)",
+        ),
+        (
+            ("  repeats: 2", "  repeats: 2\n  analyses: [{kind: pattern_space, window: 0.5, where: {body.yy: 0.4}}]"),
+            "protocol.analyses.0.where.body.yy: expected a key of the grid ['body.y']; got 'body.yy' "
+            "(did you mean `body.y`?)",
+        ),
+        (
+            (
+                "compare: [[near, far]]",
+                "compare: [[near, far]]\n  analyses: [{kind: pattern_space, window: 0.5}]\nrecord: {neurons: false}",
+            ),
+            "protocol.analyses.0: pattern_space reads the controller's RG potentials: expected record.neurons: true",
+        ),
+        (
+            ("  repeats: 2", "  repeats: 2\n  repeatz: 3"),
+            "protocol.repeatz: unknown key; expected one of ['analyses', 'best_of', ",  # the conditions protocol's keys
+        ),
     ],
 )
 def test_a_bad_conditions_protocol_is_refused_before_anything_starts(write_scenario, change, message):
@@ -213,6 +240,49 @@ def test_e4_7_runs_its_conditions_and_the_report_marks_each_switch_when_the_push
     assert [line.split(" | ")[1:3] for line in switches] == [["switch", "9.21"], ["switch_angle", "9.21"]]
     assert "couplings silenced between hip_pitch_l-hip_pitch_r" in switches[0]
     assert (tmp_path / "report" / "e4_7_push_trace.png").stat().st_size > 20_000
+
+
+def test_e4_7_pattern_space_the_switched_joints_leave_the_oscillation_and_the_walks_do_not(tmp_path):
+    """Fig. 4.23 from the recording of a short real run: the RG energy (4.15) of V_E - V_F over one gait cycle stays
+    where the gait puts it in the walk condition and falls by decades once the switch fires (L1437: knees -> plateau,
+    hips -> quiescent), and sfl report draws it."""
+    out = tmp_path / "run"
+    sets = (
+        "protocol.grid.body.push_time=[3.0]",
+        "protocol.grid.body.push_force=[10.0]",
+        "protocol.repeats=1",
+        "record.body_every=1",
+        "modules.body.params.duration=5.5",
+    )
+    done = sfl_run(SCENARIOS / "e4_7_push.yaml", out, *sets)
+    assert done.returncode == 0, done.stderr
+    scenario = yaml.safe_load((out / "scenario.yaml").read_text())
+    analysis = PatternSpaceAnalysis(kind="pattern_space", window=0.667, after=2.0, joints=["knee_l", "hip_pitch_l"])
+    joints, paths = pattern_space_paths(Trials(scenario, [out]), [out], analysis.model_dump())
+    assert joints == ["knee_l", "hip_pitch_l"]
+    points = {}
+    for row, path, push, _ in paths:
+        assert push == pytest.approx(3.0, abs=0.02)  # the push, the first event of the trial
+        points[row["condition"]] = {
+            j: [math.log10(max(value_at(p.time, p.energy, when), 1e-12)) for when in (push, push + 2.0)]
+            for j, p in path.items()
+        }
+    for joint in joints:
+        before, later = points["walk"][joint]
+        assert before > 3 and abs(later - before) < 0.3, (joint, before, later)  # it walks on: an oscillator
+        before, later = points["switch"][joint]
+        assert before > 3 and later < before - 4, (joint, before, later)  # plateau / quiescent: still
+        assert points["switch"][joint][0] == pytest.approx(points["walk"][joint][0])  # the same start, no switch yet
+    with pytest.raises(ValueError, match="no RG potentials of joint 'knee_x' .* the RGs of \\['ankle_pitch_l'"):
+        pattern_space_paths(Trials(scenario, [out]), [out], {**analysis.model_dump(), "joints": ["knee_x"]})
+    report = sfl("report", str(out), "--out", str(tmp_path / "report"))
+    assert report.returncode == 0, report.stderr
+    page = (tmp_path / "report" / "e4_7_push.md").read_text()
+    # the shipped analyses: at 34 N (not in this run: said so) and at 10 N (drawn, with its table)
+    assert "No logged trial with {'body.push_force': 34.0} holds the RG potentials" in page
+    knee = next(line for line in page.splitlines() if line.startswith("| knee_l | plateau |"))
+    assert knee.count(" -> ") == 3  # walk, switch, switch_angle
+    assert (tmp_path / "report" / "e4_7_push_pattern_space2.png").stat().st_size > 50_000
 
 
 def test_a_condition_takes_a_learn_runs_best_parameters_and_says_why_it_cannot(tmp_path, write_scenario):

@@ -22,6 +22,7 @@ from sfl_brain.modules.cpg.patterns import (
     log_energy,
     pattern_space_point,
     simulate_one_joint,
+    windowed_energy,
 )
 from sfl_brain.scenario import ScenarioError
 
@@ -328,6 +329,17 @@ def test_energy_is_the_integral_of_the_squared_angular_velocity():
     point = pattern_space_point({"hip": angle, "knee": np.zeros_like(t)}, 1e-3)
     assert point["hip"] == pytest.approx(np.log10(10 * (0.6 * np.pi) ** 2 / 2), abs=1e-4)
     assert point["knee"] == -12.0  # a still joint sits on the floor of the axis
+
+
+def test_windowed_energy_is_the_energy_of_the_last_window_and_falls_to_zero_when_the_joint_stops():
+    dt = 0.01
+    t = np.arange(0, 6.0 + 1e-9, dt)
+    angle = np.where(t < 3.0, 0.3 * np.sin(2 * np.pi * t), 0.0)  # one period a second, then still from 3 s
+    track = windowed_energy(angle, dt, 1.0)
+    assert np.isnan(track[:100]).all() and not np.isnan(track[100:]).any()
+    assert track[250] == pytest.approx(energy(angle[150:251], dt), rel=1e-9)  # the samples of the last second
+    assert track[250] == pytest.approx((0.6 * np.pi) ** 2 / 2, rel=1e-3)  # one period's integral
+    assert (track[401:] == 0).all()  # a window wholly after the stop: no motion, no energy
 
 
 def test_rhythm_deletion_keeps_the_phase():

@@ -48,6 +48,19 @@ def log_energy(angle: np.ndarray, dt: float, axis: int = 0, floor: float = 1e-12
     return np.log10(np.maximum(energy(angle, dt, axis), floor))
 
 
+def windowed_energy(trace: np.ndarray, dt: float, window: float) -> np.ndarray:
+    """(4.15) L1296 over a sliding window: at sample i, E over the last ``window`` s (samples i - n .. i, n =
+    window / dt rounded, at least 1), as :func:`energy` computes it; NaN for the first n samples. A trajectory in
+    the pattern space of L1430-1435 (Fig. 4.23): one value per joint and time, high while the joint oscillates,
+    falling toward 0 once it holds still (plateau, quiescence). Units: those of the trace squared per s."""
+    x = np.asarray(trace, dtype=float)
+    steps = max(1, int(round(window / dt)))
+    total = np.concatenate([[0.0], np.cumsum(np.diff(x) ** 2 / dt)])  # E from the first sample to sample i
+    out = np.full(len(x), np.nan)
+    out[steps:] = np.maximum(total[steps:] - total[:-steps], 0.0)  # a cumulative sum's rounding: never below 0
+    return out
+
+
 def pattern_space_point(angles: dict[str, np.ndarray], dt: float) -> dict[str, float]:
     """The point of a run in the pattern space: one log-energy axis per joint (L1294), from each joint's angle
     trace over the same window."""
