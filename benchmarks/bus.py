@@ -1,7 +1,7 @@
 """Lockstep ticks between a body and its controller in two processes, beside their physical floors.
 
     python benchmarks/bus.py [--ticks 1000] [--repeats 9] [--busy-repeats 7] [--block 50]
-                             [--work-us 90] [--spin-us 200] [--no-startup]
+                             [--work-us 90] [--spin-us 200] [--no-startup] [--startup-repeats 5]
 
 A tick: the body does ``--work-us`` of computation (its physics: a calibrated interpreter loop,
 ``_floor.py``), sends a sensor frame (240 bytes) and waits for the motor command (96 bytes). Every
@@ -176,6 +176,7 @@ def main() -> None:
     parser.add_argument("--work-us", type=float, default=90.0, help="the body's work per tick (its physics)")
     parser.add_argument("--spin-us", type=float, default=200.0, help="lockstep.spin_us of the framework before")
     parser.add_argument("--no-startup", action="store_true", help="skip the sfl run start-up timing")
+    parser.add_argument("--startup-repeats", type=int, default=5, help="sfl run start-ups per placement")
     args = parser.parse_args()
     cpus = usable_cpus()
     one = [cpus[-1]] if len(cpus) > 1 else None  # as lockstep.pin_cpus auto places a pair
@@ -251,7 +252,7 @@ def main() -> None:
         print(f"  {name:<{width}}  {np.median(r):5.2f}  (IQR {q1:.2f}-{q3:.2f})")
     if args.no_startup:
         return
-    started = startup()
+    started = startup(args.startup_repeats)
     for mode, s in started.items():
         print(
             f"sfl run start-up, 5 module processes, lockstep.pin_cpus {mode}: all alive {np.median(s[:, 0]):.2f} s, "

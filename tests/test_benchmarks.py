@@ -32,7 +32,9 @@ def figures(text: str, pattern: str, count: int = 1) -> list[float]:
 
 
 def test_bus_benchmark_prints_the_floors_bare_zenoh_and_the_framework_side_by_side():
-    out = bench("bus.py", "--ticks", "100", "--repeats", "1", "--busy-repeats", "1", "--block", "50")
+    out = bench(
+        "bus.py", "--ticks", "100", "--repeats", "1", "--busy-repeats", "1", "--block", "50", "--startup-repeats", "1"
+    )
     assert "load average" in out  # how busy the machine was
     # one process, two pipes, shared memory, bare Zenoh (mesh on two cores and one core, the lockstep link) and the
     # framework before and now, then four of them beside one busy process
@@ -62,7 +64,7 @@ def test_humanoid_benchmark_prints_the_trial_over_processes_against_one_process(
 
 
 def test_brain_benchmark_prints_the_cycle_per_trial():
-    out = bench("brain.py")
+    out = bench("brain.py", "--trials", "100", "--repeats", "1", "--batches", "100")
     figures(out, r"([\d.]+) ms/trial", count=2)
 
 

@@ -217,6 +217,7 @@ def test_viewer_url_streams_live_and_the_run_folder_keeps_the_recording(tmp_path
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         text=True,
+        start_new_session=True,  # `rerun` is a Python wrapper around the viewer binary: Ctrl-C reaches both
     )
     try:
         Lines(server.stderr).expect(f"Listening for gRPC connections on 127.0.0.1:{port}", 30)
@@ -232,7 +233,7 @@ def test_viewer_url_streams_live_and_the_run_folder_keeps_the_recording(tmp_path
         )
         assert done.returncode == 0, done.stderr
     finally:
-        server.send_signal(signal.SIGINT)
+        os.killpg(server.pid, signal.SIGINT)  # as Ctrl-C in a terminal: the wrapper alone may not pass it on
         server.wait(timeout=20)
     saved, streamed = rrd_rows(out / "recording.rrd"), rrd_rows(live)
     for counts in (saved, streamed):

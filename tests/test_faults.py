@@ -73,7 +73,7 @@ def test_kill_9_of_a_body_or_controller_restarts_it_and_retries_the_trial_at_onc
     a tick or a request to time out, and the retried trial gives the records of a run without the kill."""
     out = tmp_path / "run"
     sets = [
-        "protocol.trials=60",
+        "protocol.trials=20",
         "modules.body.params.duration=3",
         "record.body_every=0",
         "timeouts.tick=60",
