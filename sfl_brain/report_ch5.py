@@ -59,12 +59,17 @@ def setting(scenario: dict) -> dict:
 
 
 def success_region(maps: dict, points: int = 21) -> float:
-    """Share of a points^3 grid over the unit cube nearer the success map than the failure map (active neurons)."""
+    """Share of a points^3 grid over the unit cube nearer the learnt success map than the learnt failure map: each
+    map's active neurons that won at least one trial of their kind (an untrained map, spread over the cube by its
+    initialisation, is no region; a run without a success has none, one without a failure covers the cube)."""
     axis = np.linspace(0.0, 1.0, points)
     grid = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
 
     def nearest(name: str) -> np.ndarray:
-        w = maps[f"{name}_weights"][maps[f"{name}_active"]]
+        learnt = maps[f"{name}_active"] & (maps[f"{name}_wins"] > 0)
+        if not learnt.any():
+            return np.full(len(grid), np.inf)
+        w = maps[f"{name}_weights"][learnt]
         return np.min(np.linalg.norm(grid[:, None, :] - w[None, :, :], axis=2), axis=1)
 
     return float(np.mean(nearest("success") < nearest("failure")))

@@ -440,8 +440,8 @@ def test_a_terrain_switch_needs_its_threshold_direction_and_new_parameters():
         ({"terrain_switch": "at_once", "next_sigma_s": 4.0, "switch_band": 1.5},
          "terrain_switch 'at_once': expected the trial parameter switch_when too; got none"),
         ({"terrain_switch": "gradual", "switch_threshold": 0.1, "switch_when": "above"},
-         "terrain_switch 'gradual': expected at least one of next_gain_pitch, next_gain_roll, next_sigma_s (the new "
-         "condition's parameters); got none"),
+         "terrain_switch 'gradual': expected at least one of next_gain_pitch, next_gain_roll, next_sigma_s, "
+         "next_theta_mlr (the new condition's parameters); got none"),
     ]:  # fmt: skip
         with pytest.raises(ValueError) as err:
             start(controller, params=params)
@@ -505,3 +505,32 @@ def test_switch_when_outside_fires_on_leaving_the_measured_band_either_way_and_n
     assert event.time == pytest.approx(off.t[later][np.argmax(outside)])
     with pytest.raises(ValueError, match="switch_when 'outside': expected a band"):
         walk({"terrain_switch": "at_once", "switch_threshold": 0.1, "switch_when": "outside", **SWITCH_TO}, {})
+
+
+def test_a_terrain_switch_moves_theta_mlr_gradually_to_the_new_conditions():
+    """next_theta_mlr: chapter 5's uphill learns with E4.6's climbing setting (theta_MLR -0.3), so the switch onto
+    the slope moves theta_MLR of (4.9) too, with the signs of §7.6 (PF-E -theta, PF-F +theta), over switch_seconds;
+    driven by hand: the torso pitch 0.2 rad, then below the threshold 0 at 4 s."""
+    controller = humanoid_controller()
+    params = {"terrain_switch": "gradual", "switch_threshold": 0.0, "switch_when": "below", "next_theta_mlr": -0.3}
+    reads, _ = start(controller, params=params)
+    network = controller.network
+    f_cols = 2 * np.arange(network.n_joints) + 1
+    e_cols = 2 * np.arange(network.n_joints)
+    sensors = np.zeros(len(reads))
+    sensors[reads.index("torso_pitch")] = 0.2
+    theta = []
+    for t in range(500):
+        if t == 400:
+            sensors[reads.index("torso_pitch")] = -0.1
+        tick(controller, sensors, t)
+        theta.append(network.theta_mlr_signed[0, f_cols].copy())
+        np.testing.assert_array_equal(network.theta_mlr_signed[0, e_cols], -theta[-1])
+    theta = np.array(theta)
+    [event] = network.terrain_switch_events
+    assert event.old == {"theta_mlr": 0.0} and event.new == {"theta_mlr": -0.3}
+    k = int(round(event.time / DT))
+    assert 400 <= k <= 401
+    np.testing.assert_array_equal(theta[:k], 0.0)  # untouched before the switch
+    assert -0.3 < theta[k + 30, 0] < 0.0  # on its way, one cycle long (0.667 s)
+    np.testing.assert_allclose(theta[k + 70 :], -0.3, atol=1e-12)  # arrived

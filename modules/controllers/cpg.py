@@ -59,12 +59,13 @@ caption; separate maps for flat, 10 deg up and 10 deg down, §5.7; switching whi
   the vertical by shifting the ankle pitches' theta_0 (L1764, §7.18; circuit.py ``Posture``); default the circuit's.
 - the terrain switch (§5.8): the controller walks with the trial's ``gain_pitch``, ``gain_roll``, ``sigma_s`` and,
   when the terrain changes, moves to ``next_gain_pitch``, ``next_gain_roll``, ``next_sigma_s`` (the new condition's
-  best neuron, physical values; one not given stays as it is). ``terrain_switch``: "off" (default), "at_once" (in one
-  tick) or "gradual" (linearly over the module parameter ``switch_seconds``, one cycle of the flat gait, §7.17); it
-  fires once, the first tick at or after the module parameter ``terrain_switch_after`` (s: the start-up transient
-  must not fire it) when the input ``terrain_input`` (the torso pitch, rad) is at or ``switch_when`` ("above", "below";
-  "outside": out of the measured band either way)
-  ``switch_threshold`` (rad), or a threshold the walk itself measures: ``switch_band`` k, the input's mean +- k x its
+  best neuron, physical values; one not given stays as it is) and ``next_theta_mlr`` (the new condition's descending
+  theta_MLR, (4.9): chapter 5's uphill learns with E4.6's climbing setting). ``terrain_switch``: "off" (default),
+  "at_once" (in one tick) or "gradual" (linearly over the module parameter ``switch_seconds``, one cycle of the flat
+  gait, §7.17); it fires once, the first tick at or after the module parameter ``terrain_switch_after`` (s: the
+  start-up transient must not fire it) when the input ``terrain_input`` (the torso pitch, rad) is at or ``switch_when``
+  ("above", "below"; "outside": out of the measured band either way) ``switch_threshold`` (rad), or a threshold the
+  walk itself measures: ``switch_band`` k, the input's mean +- k x its
   half range over the module parameter ``switch_measure`` s from ``terrain_switch_after`` (§7.17's rule: mean +- 1.5 x
   half range of the gait before the terrain changes; detection starts once it is known). The thesis detects "when the
   torso reaches previously defined threshold" (L1759): a level, not a rising edge. On logged trials the switch is a
@@ -112,6 +113,7 @@ TRIAL_PARAMS = (
     "next_gain_pitch",
     "next_gain_roll",
     "next_sigma_s",
+    "next_theta_mlr",
     "start_slope_deg",
 )
 #: the group gain multipliers a trial may set (ch. 5's w1, w2): trial parameter -> the circuit's gain group
@@ -444,6 +446,7 @@ class CPGController(Controller):
                 after=p.terrain_switch_after,
                 gains={GAIN_PARAMS[k]: float(params[k]) for k in ("next_gain_pitch", "next_gain_roll") if k in params},
                 sigma_s=float(params["next_sigma_s"]) if "next_sigma_s" in params else None,
+                theta_mlr=float(params["next_theta_mlr"]) if "next_theta_mlr" in params else None,
                 sigma_joints=self._pattern_joints,
                 band=(float(params["switch_band"]), p.switch_measure) if "switch_band" in params else None,
             )
@@ -548,10 +551,10 @@ def _check_terrain_switch(params: dict) -> None:
         )
     if "switch_when" not in params:
         raise ValueError(f"terrain_switch {mode!r}: expected the trial parameter switch_when too; got none")
-    if not any(k in params for k in ("next_gain_pitch", "next_gain_roll", "next_sigma_s")):
+    if not any(k in params for k in ("next_gain_pitch", "next_gain_roll", "next_sigma_s", "next_theta_mlr")):
         raise ValueError(
-            f"terrain_switch {mode!r}: expected at least one of next_gain_pitch, next_gain_roll, next_sigma_s "
-            "(the new condition's parameters); got none"
+            f"terrain_switch {mode!r}: expected at least one of next_gain_pitch, next_gain_roll, next_sigma_s, "
+            "next_theta_mlr (the new condition's parameters); got none"
         )
 
 

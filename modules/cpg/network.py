@@ -207,7 +207,19 @@ class _TerrainSwitch:
     """An armed terrain switch (``CPGNetwork.arm_terrain_switch``) and its progress per batch copy."""
 
     def __init__(
-        self, network: CPGNetwork, input: str, threshold, when, after, mode, seconds, gains, sigma_s, joints, band=None
+        self,
+        network: CPGNetwork,
+        input: str,
+        threshold,
+        when,
+        after,
+        mode,
+        seconds,
+        gains,
+        sigma_s,
+        joints,
+        band=None,
+        theta_mlr=None,
     ):
         b = network.batch
         self.input_name, self.input = input, network.circuit.inputs.index(input)
@@ -227,6 +239,9 @@ class _TerrainSwitch:
         self.sigma_s = sigma_s  # its new value, or None: unchanged
         idx = network._joint_indices(joints)
         self.sigma_columns = np.concatenate([2 * idx + E, 2 * idx + F])
+        self.theta_mlr = theta_mlr  # its new value (4.9, the signs of §7.6), or None: unchanged
+        self.theta_e, self.theta_f = 2 * idx + E, 2 * idx + F
+        self.old_theta = np.zeros((b, len(idx)))
         self.fired = np.zeros(b, dtype=bool)
         self.done = np.zeros(b, dtype=bool)
         self.start = np.zeros(b)  # s: each copy's switch time
@@ -532,6 +547,7 @@ class CPGNetwork:
         sigma_s: float | None = None,
         sigma_joints: list[str] | None = None,
         band: tuple[float, float] | None = None,
+        theta_mlr: float | None = None,
     ) -> None:
         """Switch parameters once this trial when the terrain changes (§5.8, L1759-1766): from ``after`` s on, the first
         tick whose ``input`` (e.g. the torso pitch, rad) is at or ``when`` ("above", "below") ``threshold`` starts
@@ -542,6 +558,8 @@ class CPGNetwork:
         mean +- k x its half range (- below, + above, either for "outside") over ``seconds`` from ``after`` (digest
         §7.17's rule, "defined with taking into account the oscillation range of the torso", L1759), and detection
         starts once it is known.
+        ``theta_mlr`` (None: unchanged) moves the descending theta_MLR (4.9) of ``sigma_joints`` the same way (a
+        condition learnt with another theta_MLR, e.g. chapter 5's uphill with E4.6's climbing setting).
         ``reset`` disarms it; the switches are in ``terrain_switch_events``."""
         if input not in self.circuit.inputs:
             raise ValueError(
@@ -567,7 +585,7 @@ class CPGNetwork:
         if when == "outside" and band is None:
             raise ValueError("switch_when 'outside': expected a band (switch_band) to leave; got a threshold")
         self._terrain = _TerrainSwitch(
-            self, input, threshold, when, after, mode, seconds, gains or {}, sigma_s, sigma_joints, band
+            self, input, threshold, when, after, mode, seconds, gains or {}, sigma_s, sigma_joints, band, theta_mlr
         )
 
     def set_descending(self, alpha_mlr=None, theta_mlr=None, joints: list[str] | None = None) -> None:
@@ -926,6 +944,12 @@ class CPGNetwork:
             self.sigma_in[cells] = value
             self.sigma_out[cells] = value
             self._update_coefficients()
+        if ts.theta_mlr is not None:
+            old = ts.old_theta[rows]
+            value = old + fraction[:, None] * (ts.theta_mlr - old)
+            self.theta_mlr_signed[np.ix_(rows, ts.theta_e)] = -value
+            self.theta_mlr_signed[np.ix_(rows, ts.theta_f)] = value
+            self._update_pattern_formation()
         ts.done[rows] = fraction >= 1.0
         if ts.done.all():
             self._terrain = None  # every copy has switched and arrived: nothing more per tick
@@ -937,6 +961,7 @@ class CPGNetwork:
         for group in ts.gains:
             ts.old_gains[group][due] = self.gain_multipliers[group][due]
         ts.old_sigma[due] = self.sigma_s[np.ix_(np.flatnonzero(due), ts.sigma_columns)]
+        ts.old_theta[due] = self.theta_mlr_signed[np.ix_(np.flatnonzero(due), ts.theta_f)]
 
         def per_copy(values: np.ndarray) -> float | np.ndarray:  # one number, or one per switched copy
             values = np.asarray(values, dtype=float)
@@ -947,6 +972,9 @@ class CPGNetwork:
         if ts.sigma_s is not None:
             old["sigma_s"] = per_copy(ts.old_sigma[due])
             new["sigma_s"] = float(ts.sigma_s)
+        if ts.theta_mlr is not None:
+            old["theta_mlr"] = per_copy(ts.old_theta[due])
+            new["theta_mlr"] = float(ts.theta_mlr)
         self.terrain_switch_events.append(
             TerrainSwitchEvent(
                 time=self.time,
