@@ -196,6 +196,7 @@ def humanoid_layout(timeline: str, learning: bool) -> rrb.Blueprint:
         contents=["/controller/events/**", "/trials/log", "/body/trial/events", "/body/events/**"],
     )
     if learning:
+        run = _so_far()  # per trial: every trial up to the cursor, on sim_time too (each at its start)
         right = rrb.Vertical(
             _maps_views(),
             rrb.TimeSeriesView(
@@ -203,12 +204,14 @@ def humanoid_layout(timeline: str, learning: bool) -> rrb.Blueprint:
                 contents=["/trials/quality"],
                 overrides={"/trials/quality": rr.SeriesPoints(names="eta", colors=[SUCCESS], marker_sizes=3.0)},
                 plot_legend=rrb.PlotLegend(visible=False),
+                time_ranges=run,
             ),
             rrb.TimeSeriesView(
                 name="per trial: rho (5.2), the reward a success teaches",
                 contents=["/trials/rho"],
                 overrides={"/trials/rho": rr.SeriesPoints(names="rho", colors=[(60, 110, 220)], marker_sizes=3.0)},
                 plot_legend=rrb.PlotLegend(visible=False),
+                time_ranges=run,
             ),
             rrb.TimeSeriesView(
                 name="per trial: s_vig and its band, N_s/N_f",
@@ -219,6 +222,7 @@ def humanoid_layout(timeline: str, learning: bool) -> rrb.Blueprint:
                     "/vigilance/band_high": rr.SeriesLines(names="band high", colors=[(150, 150, 150)]),
                     "/trials/ns_nf": rr.SeriesLines(names="N_s/N_f", colors=[(230, 150, 30)]),
                 },
+                time_ranges=run,
             ),
             rrb.TimeSeriesView(
                 name="per trial: the winning neuron of each map (index)",
@@ -231,6 +235,7 @@ def humanoid_layout(timeline: str, learning: bool) -> rrb.Blueprint:
                         names="failure winner", colors=[FAILURE], marker_sizes=3.0
                     ),
                 },
+                time_ranges=run,
             ),
             events,
             row_shares=[5, 2, 2, 2, 2, 2],
