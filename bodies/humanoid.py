@@ -273,6 +273,7 @@ class Humanoid(Body):
     SENSORS = SENSORS
     COMMANDS = COMMANDS
     TRIAL_PARAMS = ("slope_deg", "terrain", *PUSH_RANGES, *START_RANGES)
+    LAYOUT = "humanoid"  # the recording's default layout: the walk in 3-D, the torso pitch with the terrain switch
 
     def __init__(self, params: HumanoidParams | None = None, *, seed: int = 0) -> None:
         super().__init__(params, seed=seed)
@@ -707,7 +708,17 @@ class Humanoid(Body):
         colors = np.array([_color(p) for p in PARTS], dtype=np.uint8)
         halves = np.array([p.size for p in PARTS]) / 2
         self.telemetry.emit(
-            Boxes3D("robot", trial_id, times, positions + _rotate(turns, offsets), halves, turns, len(PARTS), colors)
+            Boxes3D(
+                "robot",
+                trial_id,
+                times,
+                positions + _rotate(turns, offsets),
+                halves,
+                turns,
+                len(PARTS),
+                colors,
+                follow=True,  # the view of the walk moves along x with the robot
+            )
         )
         ground = self.ground_boxes
         self.telemetry.emit(

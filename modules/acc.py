@@ -25,7 +25,7 @@ from sfl_brain.messages import (
     Learned,
 )
 from sfl_brain.module import Module, on
-from sfl_brain.telemetry import FAILURE, SUCCESS, MapSnapshots
+from sfl_brain.telemetry import FAILURE, SUCCESS, MapSnapshots, MapWinners
 
 from .som import SelfOrganisingMap, SOMParams
 
@@ -54,6 +54,7 @@ class ACC(Module):
         if p.restore:
             self.restore(p.restore)
         self._snapshots: list[tuple[int, dict]] = []  # map states not yet emitted as telemetry
+        self._winners: list[tuple[int, dict]] = []  # each trial's winner of each map, not yet emitted
         self._flushed = time.monotonic()
 
     # --- evaluation and decision -------------------------------------------------
@@ -84,6 +85,11 @@ class ACC(Module):
     def on_learn(self, msg: Learn) -> Learned:
         v = np.asarray(msg.v, dtype=float)
         winners = self.success_map.winner(v), self.failure_map.winner(v)  # before learning: the maps that judged v
+        if self.telemetry is not None:  # trial index (samples so far), each map's winner and where it stood
+            trial = self.success_map.samples + self.failure_map.samples
+            self._winners.append(
+                (trial, {name: (n, m.weights[n].copy()) for (name, m), n in zip(self._maps(), winners, strict=True)})
+            )
         change = self.learn(v, msg.success, msg.rho, msg.eta)
         if self.telemetry is not None:
             self.defer(self.log_maps)  # after the reply: showing the maps is off the learning cycle's path
@@ -204,9 +210,17 @@ class ACC(Module):
     def flush_maps(self, final: bool = False) -> None:
         """Emit the buffered snapshots as :class:`~sfl_brain.telemetry.MapSnapshots`, one per map
         (``success_map``, ``failure_map``): neurons, active flags and grid edges after each trial, on
-        the ``trial`` timeline (the number of trials learnt). ``final``: the maps as the run leaves them."""
+        the ``trial`` timeline (the number of trials learnt). ``final``: the maps as the run leaves them. Before them,
+        each learnt trial's winner of each map (:class:`~sfl_brain.telemetry.MapWinners`)."""
         snapshots, self._snapshots = self._snapshots, []
+        winners, self._winners = self._winners, []
         self._flushed = time.monotonic()
+        if self.telemetry is not None and winners:  # each trial's winners over the snapshot they won in
+            trials = np.array([t for t, _ in winners])
+            for name, _ in self._maps():
+                neurons = np.array([w[name][0] for _, w in winners])
+                positions = np.stack([w[name][1] for _, w in winners])
+                self.telemetry.emit(MapWinners(f"{name}_map", trials, neurons, positions, self.COLOURS[name]))
         if not snapshots or self.telemetry is None:
             return
         trials = np.array([t for t, _ in snapshots])

@@ -108,6 +108,9 @@ class Body(Module):
     COMMANDS: ClassVar[tuple[Signal, ...]] = ()
     #: parameters a trial request may set on the body (checked by ``sfl check``)
     TRIAL_PARAMS: ClassVar[tuple[str, ...]] = ()
+    #: the recording's default layout for a run of this body (``sfl_brain.rrlog.LAYOUTS``): "walker" (a planar
+    #: walker's y-up pictures) or "humanoid" (3-D boxes, z up, with the terrain switch over the torso pitch)
+    LAYOUT: ClassVar[str] = "walker"
 
     def __init__(self, params: BodyParams | None = None, *, seed: int = 0) -> None:
         super().__init__(params, seed=seed)

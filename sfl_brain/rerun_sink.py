@@ -17,7 +17,9 @@ How the items look (the default layout is :func:`sfl_brain.rrlog.blueprint`):
 * :class:`~sfl_brain.telemetry.MapSnapshots`: points and grid edges in the same y-up space (a 2-D
   map in the plane z = 0, so that the second axis of Omega points up) on ``trial`` and, when the
   run's trial length is known, on ``sim_time`` at ``trial x trial_seconds`` (the maps that chose
-  trial k are shown while trial k runs).
+  trial k are shown while trial k runs);
+* :class:`~sfl_brain.telemetry.MapWinners`: each trial's winning neuron as a larger labelled point at
+  ``<map>/winner``, in the same space and on the same timelines as the map's snapshot it won in.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ from collections.abc import Callable
 import numpy as np
 import rerun as rr
 
-from .telemetry import Arrows2D, Boxes3D, Event, MapSnapshots, Rates, Scalars, Strips2D, Telemetry
+from .telemetry import Arrows2D, Boxes3D, Event, MapSnapshots, MapWinners, Rates, Scalars, Strips2D, Telemetry
 
 log = logging.getLogger("sfl.rerun_sink")
 
@@ -244,9 +246,30 @@ class RerunTelemetry:
                 np.full(frames, item.per_frame)
             ),
         )
+        if item.follow:  # as a followed picture's: the view of the body has <entity>/follow as origin
+            xs = np.asarray(item.centers, dtype=float)[:, 0].reshape(frames, item.per_frame).mean(axis=1)
+            self._queue(f"{self.entity}/{FOLLOW}", "follow", item.times, item.trial, xs)
 
     def _Event(self, item: Event) -> None:
         self._queue(self._path(item), "events", [item.time], item.trial, (item.text, item.level, item.color))
+
+    def _MapWinners(self, item: MapWinners) -> None:
+        """Each trial's winning neuron, a larger point labelled with its index over the map's snapshot of that
+        trial (``<map>/winner``), on ``trial`` and, when known, ``sim_time`` at the trial's start."""
+        trials = np.asarray(item.trials, dtype=np.int64)
+        index = [rr.TimeColumn("trial", sequence=trials)]
+        if self.trial_seconds:
+            index.append(rr.TimeColumn("sim_time", duration=trials * self.trial_seconds))
+        positions = np.asarray(item.positions, dtype=float)[:, :3]
+        if positions.shape[1] < 3:
+            positions = np.column_stack([positions, np.zeros((len(positions), 3 - positions.shape[1]))])
+        self._plane()
+        path = f"{self._path(item)}/winner"
+        self._style_once(
+            path, rr.Points3D.from_fields(radii=[0.02], colors=np.array([item.color], dtype=np.uint8), show_labels=True)
+        )
+        labels = [f"{item.path.removesuffix('_map')} winner {int(n)}" for n in item.neurons]
+        self.recording.send_columns(path, index, rr.Points3D.columns(positions=positions, labels=labels))
 
     def _MapSnapshots(self, item: MapSnapshots) -> None:
         k, size, dim = item.weights.shape

@@ -7,7 +7,8 @@ Entity paths (every process logs into the same recording id; ``docs/recording.md
   ``decisions/v_unit/<axis>``, ``decisions/v/<axis>``: one row per decision (per sample drawn), on
   the ``decision`` timeline, on ``trial`` (the trial it was drawn for: a no-go's is the next trial)
   and on ``sim_time`` (that trial's start);
-* ``trials/*`` (success, success rate, N_s, N_f, N_s/N_f, eta, rho, v per axis), ``trials/log`` (a
+* ``trials/*`` (success, success rate, N_s, N_f, N_s/N_f, eta, rho, v per axis, each map's winning neuron's
+  index: ``success_winner``, ``failure_winner``), ``trials/log`` (a
   line per trial, green success / red failure), ``vigilance/*`` (s_vig and its band) and
   ``omega/trials`` (the tried point, green success / red failure) on ``trial`` and ``sim_time``;
 * ``acc/success_map``, ``acc/failure_map``: the maps (the ACC process's telemetry);
@@ -15,7 +16,8 @@ Entity paths (every process logs into the same recording id; ``docs/recording.md
   (the body workers' telemetry), ``controller/neurons/...``: neuron activities.
 
 On ``sim_time`` trial k starts at ``k * trial_seconds`` (the body's ``duration``), so scrubbing it
-shows a trial's walker beside the decision that chose it and the maps that decided.
+shows a trial's walker beside the decision that chose it and the maps that decided. The default layout depends on
+the run (:func:`layout_of`): the planar walkers' (:func:`walker_layout`) or the humanoid's (:func:`humanoid_layout`).
 """
 
 from __future__ import annotations
@@ -78,8 +80,188 @@ DECISION_SERIES = {
 }
 
 
-def blueprint(timeline: str = "trial") -> rrb.Blueprint:
-    """The default layout: the body on the left (a y-up 3-D view of the walker and its ground, joint
+#: the default layouts: the planar walkers' (chapters 3-4) and the humanoid's (chapter 5, the humanoid's ch. 4 runs)
+LAYOUTS = ("walker", "humanoid")
+
+
+def layout_of(plan) -> dict:
+    """The default layout's arguments for a run's :class:`~sfl_brain.scenario.Plan`: ``body`` from its body class's
+    ``LAYOUT`` ("walker" when it names none), ``learning`` when its protocol learns (maps, eta, rho, s_vig, winners)."""
+    body = next((i.cls for i in plan.instances if i.spec_name == plan.body_spec), None)
+    return {
+        "body": getattr(body, "LAYOUT", "walker"),
+        "learning": plan.scenario.protocol.kind == "learn",
+    }
+
+
+def blueprint(timeline: str | None = None, body: str = "walker", learning: bool = True) -> rrb.Blueprint:
+    """The default layout of a run whose body is drawn as ``body`` (one of ``LAYOUTS``), with the learning's panels
+    when ``learning``; ``timeline`` is the one shown first (default: ``trial`` for a learning run, else ``sim_time``).
+    "walker": :func:`walker_layout`; "humanoid": :func:`humanoid_layout`."""
+    if body not in LAYOUTS:
+        raise ValueError(f"blueprint body: expected one of {list(LAYOUTS)}; got {body!r}")
+    timeline = timeline or ("trial" if learning else "sim_time")
+    if body == "humanoid":
+        return humanoid_layout(timeline, learning)
+    return walker_layout(timeline)
+
+
+def _so_far() -> list:
+    """Every row up to the time cursor, on either timeline (the tried points so far)."""
+    return [
+        rrb.VisibleTimeRange(t, start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.cursor_relative())
+        for t in ("trial", "sim_time")
+    ]
+
+
+def _unit_square() -> rrb.EyeControls3D:
+    """Omega's unit square (cube) seen along z, its second axis up."""
+    return rrb.EyeControls3D(
+        kind="Orbital", position=(0.5, 0.5, 1.3), look_target=(0.5, 0.5, 0.0), eye_up=(0.0, 1.0, 0.0)
+    )
+
+
+def _around(before: float, after: float) -> rrb.VisibleTimeRange:
+    """On ``sim_time``, ``before`` s before the cursor to ``after`` s after it (a logged trial's series)."""
+    return rrb.VisibleTimeRange(
+        "sim_time",
+        start=rrb.TimeRangeBoundary.cursor_relative(seconds=-before),
+        end=rrb.TimeRangeBoundary.cursor_relative(seconds=after),
+    )
+
+
+def _maps_views() -> rrb.Horizontal:
+    return rrb.Horizontal(
+        rrb.Spatial3DView(
+            name="maps: success (by learnt reward), failure (red); winners",
+            origin="/",
+            contents=["/acc/**", "/omega/axes"],
+            eye_controls=_unit_square(),
+        ),
+        rrb.Spatial3DView(
+            name="tried points so far",
+            origin="/",
+            contents=["/omega/**"],
+            eye_controls=_unit_square(),
+            time_ranges=_so_far(),
+        ),
+    )
+
+
+#: the terrain switch over the torso pitch: the series' names and colours (the controller's are orange)
+TORSO_SERIES = {
+    "/body/torso/pitch": rr.SeriesLines(names="torso pitch (deg)", colors=[(60, 110, 220)]),
+    "/controller/terrain_switch/band_low": rr.SeriesPoints(
+        names="switch threshold, low (deg)", colors=[(240, 140, 20)], marker_sizes=1.5
+    ),
+    "/controller/terrain_switch/band_high": rr.SeriesPoints(
+        names="switch threshold, high (deg)", colors=[(240, 140, 20)], marker_sizes=1.5
+    ),
+    "/controller/terrain_switch/at": rr.SeriesPoints(
+        names="switch", colors=[(240, 140, 20)], markers="diamond", marker_sizes=8.0
+    ),
+}
+
+
+def humanoid_layout(timeline: str, learning: bool) -> rrb.Blueprint:
+    """The humanoid's layout (chapter 5). Left, a logged trial on ``sim_time``: the walk (every NAO link as a box, the
+    ground, seen from the side by a camera that follows the robot along x), the torso pitch with the terrain switch's
+    threshold and the switch marked, the torso's distance. Right, when ``learning``, per trial: both maps (the success
+    map coloured by each neuron's learnt reward, each trial's winning neurons labelled) and the tried points, eta
+    (5.8), rho (5.2), s_vig with its band and N_s/N_f, the winning neurons' indices; without learning (a
+    conditions run), each trial's outcome; then the events."""
+    walk = rrb.Spatial3DView(  # seen from /body/follow, which moves along x with the robot (z up)
+        name="walk (z up, sim_time)",
+        origin="/body/follow",
+        contents=["/body/robot", "/body/ground"],
+        line_grid=rrb.LineGrid3D(visible=True, spacing=0.25, plane=rr.components.Plane3D.XY),
+        eye_controls=rrb.EyeControls3D(
+            kind="Orbital", position=(0.35, -1.3, 0.55), look_target=(0.0, 0.0, 0.25), eye_up=(0.0, 0.0, 1.0)
+        ),
+    )
+    trial_range = _around(30.0, 10.0)  # most of a logged trial (30-40 s) before the cursor
+    left = rrb.Vertical(
+        walk,
+        rrb.TimeSeriesView(
+            name="torso pitch (deg), the terrain switch's threshold and the switch",
+            contents=list(TORSO_SERIES),
+            overrides=TORSO_SERIES,
+            time_ranges=trial_range,
+        ),
+        rrb.TimeSeriesView(name="torso's distance x (m)", contents=["/body/path/x"], time_ranges=trial_range),
+        row_shares=[4, 3, 2],
+    )
+    events = rrb.TextLogView(
+        name="events (terrain switches, trials)",
+        contents=["/controller/events/**", "/trials/log", "/body/trial/events", "/body/events/**"],
+    )
+    if learning:
+        run = _so_far()  # per trial: every trial up to the cursor, on sim_time too (each at its start)
+        right = rrb.Vertical(
+            _maps_views(),
+            rrb.TimeSeriesView(
+                name="per trial: eta (5.8), the quality of a success (0: a failure)",
+                contents=["/trials/quality"],
+                overrides={"/trials/quality": rr.SeriesPoints(names="eta", colors=[SUCCESS], marker_sizes=3.0)},
+                plot_legend=rrb.PlotLegend(visible=False),
+                time_ranges=run,
+            ),
+            rrb.TimeSeriesView(
+                name="per trial: rho (5.2), the reward a success teaches",
+                contents=["/trials/rho"],
+                overrides={"/trials/rho": rr.SeriesPoints(names="rho", colors=[(60, 110, 220)], marker_sizes=3.0)},
+                plot_legend=rrb.PlotLegend(visible=False),
+                time_ranges=run,
+            ),
+            rrb.TimeSeriesView(
+                name="per trial: s_vig and its band, N_s/N_f",
+                contents=["/vigilance/s_vig", "/vigilance/band_low", "/vigilance/band_high", "/trials/ns_nf"],
+                overrides={
+                    "/vigilance/s_vig": rr.SeriesLines(names="s_vig", colors=[(60, 110, 220)]),
+                    "/vigilance/band_low": rr.SeriesLines(names="band low", colors=[(150, 150, 150)]),
+                    "/vigilance/band_high": rr.SeriesLines(names="band high", colors=[(150, 150, 150)]),
+                    "/trials/ns_nf": rr.SeriesLines(names="N_s/N_f", colors=[(230, 150, 30)]),
+                },
+                time_ranges=run,
+            ),
+            rrb.TimeSeriesView(
+                name="per trial: the winning neuron of each map (index)",
+                contents=["/trials/success_winner", "/trials/failure_winner"],
+                overrides={
+                    "/trials/success_winner": rr.SeriesPoints(
+                        names="success winner", colors=[SUCCESS], marker_sizes=3.0
+                    ),
+                    "/trials/failure_winner": rr.SeriesPoints(
+                        names="failure winner", colors=[FAILURE], marker_sizes=3.0
+                    ),
+                },
+                time_ranges=run,
+            ),
+            events,
+            row_shares=[5, 2, 2, 2, 2, 2],
+        )
+    else:
+        right = rrb.Vertical(
+            rrb.TimeSeriesView(
+                name="trials: outcome; start/end markers",
+                contents=["/trials/success", "/trials/survived", "/body/trial/success", "/body/trial/failure"],
+                overrides={
+                    "/trials/success": rr.SeriesPoints(names="success (1) / failure (0)", marker_sizes=3.0),
+                    "/trials/survived": rr.SeriesPoints(names="survived (1) / fell (0)", marker_sizes=2.0),
+                },
+            ),
+            events,
+            row_shares=[2, 3],
+        )
+    return rrb.Blueprint(
+        rrb.Horizontal(left, right, column_shares=[3, 2]),
+        rrb.TimePanel(state="collapsed", timeline=timeline, play_state="following"),
+        collapse_panels=True,
+    )
+
+
+def walker_layout(timeline: str = "trial") -> rrb.Blueprint:
+    """The planar walkers' layout: the body on the left (a y-up 3-D view of the walker and its ground, joint
     angles in degrees, motor voltages, neuron activities), the brain on the right (both maps with the
     tried points, the ACC's decisions, the trials with start/end markers, the events). Every panel
     has data on both the ``trial`` and the ``sim_time`` timelines; ``timeline`` is the one shown first."""
@@ -106,31 +288,8 @@ def blueprint(timeline: str = "trial") -> rrb.Blueprint:
         row_shares=[3, 2, 2, 2],
     )
 
-    def unit_square() -> rrb.EyeControls3D:  # Omega's unit square, its second axis up
-        return rrb.EyeControls3D(
-            kind="Orbital", position=(0.5, 0.5, 1.3), look_target=(0.5, 0.5, 0.0), eye_up=(0.0, 1.0, 0.0)
-        )
-
-    so_far = [  # every tried point up to the time cursor, on either timeline
-        rrb.VisibleTimeRange(t, start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.cursor_relative())
-        for t in ("trial", "sim_time")
-    ]
     brain = rrb.Vertical(
-        rrb.Horizontal(
-            rrb.Spatial3DView(
-                name="success (green) and failure (red) maps",
-                origin="/",
-                contents=["/acc/**", "/omega/axes"],
-                eye_controls=unit_square(),
-            ),
-            rrb.Spatial3DView(
-                name="tried points so far",
-                origin="/",
-                contents=["/omega/**"],
-                eye_controls=unit_square(),
-                time_ranges=so_far,
-            ),
-        ),
+        _maps_views(),
         rrb.TimeSeriesView(
             name="ACC decisions: go iff d_f - d_s > s_vig",
             contents=[f"/decisions/{k}" for k in DECISION_SERIES] + ["/vigilance/band_low", "/vigilance/band_high"],
@@ -167,15 +326,21 @@ class RerunLog:
     """
 
     def __init__(
-        self, run_id: str, rrd: str | None, viewer: str | None, axes: list[str], trial_seconds: float | None = None
+        self,
+        run_id: str,
+        rrd: str | None,
+        viewer: str | None,
+        axes: list[str],
+        trial_seconds: float | None = None,
+        layout: dict | None = None,
     ) -> None:
         from .host import attach_sinks
 
         self.rec = rr.RecordingStream("sfl-brain", recording_id=run_id)
         attach_sinks(self.rec, rrd, viewer)
-        # the default layout for this application, not forced on a viewer that has one of its own (a
-        # user's changes, a layout file opened with the recording)
-        self.rec.send_blueprint(blueprint(), make_active=False, make_default=True)
+        # the default layout for this run (``layout``: :func:`blueprint`'s arguments, :func:`layout_of`), not forced
+        # on a viewer that has one of its own (a user's changes, a layout file opened with the recording)
+        self.rec.send_blueprint(blueprint(**(layout or {})), make_active=False, make_default=True)
         self.axes = axes
         self.trial_seconds = trial_seconds
         self._decisions: list[dict] = []
@@ -286,6 +451,8 @@ class RerunLog:
             ("trials/n_success", "n_success"),
             ("trials/n_failure", "n_failure"),
             ("trials/survived", "survived"),
+            ("trials/success_winner", "success_winner"),  # the neuron of each map that judged the trial's point
+            ("trials/failure_winner", "failure_winner"),
             *((f"trials/v/{axis}", axis) for axis in self.axes),
             ("vigilance/s_vig", "s_vig"),
             ("vigilance/band_low", "band_low"),

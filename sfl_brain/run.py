@@ -49,7 +49,7 @@ from .events import (
 from .processes import kill_quietly
 from .protocols import PROTOCOLS, Conductor, Progress
 from .records import RecordWriter, read_records, record_to, summarise
-from .rrlog import RERUN_FLUSH_TIMEOUT, RerunLog
+from .rrlog import RERUN_FLUSH_TIMEOUT, RerunLog, layout_of
 from .runtime import Supervisor
 from .scenario import Plan
 from .service import RunError
@@ -318,6 +318,7 @@ def run(
         viewer_url,
         [a.name for a in plan.scenario.space],
         plan.trial_seconds,
+        layout_of(plan),
     )
     record_to(events, writer, decisions=plan.scenario.record.decisions)
     events.subscribe(DecisionsMade, lambda e: rr_log.decisions(e.rows))

@@ -89,6 +89,7 @@ class Boxes3D:
     quaternions: np.ndarray  # (frames * per_frame, 4)
     per_frame: int
     colors: np.ndarray  # (per_frame, 3) uint8
+    follow: bool = False  # the view of the body follows these boxes along x (one per body: the robot)
 
 
 @dataclass(frozen=True)
@@ -123,7 +124,20 @@ class MapSnapshots:
     values: np.ndarray | None = None
 
 
-Telemetry = Scalars | Strips2D | Arrows2D | Boxes3D | Event | MapSnapshots
+@dataclass(frozen=True)
+class MapWinners:
+    """The neuron of a map that won each of ``trials``'s point (the one (3.1)-(3.2) measured it by, before the map
+    learnt it): its index ``neurons`` (k,) and its weights ``positions`` (k, dim) in the unit space, as the map stood
+    when it judged the point (its snapshot at that trial's index)."""
+
+    path: str
+    trials: np.ndarray
+    neurons: np.ndarray
+    positions: np.ndarray
+    color: tuple[int, int, int]
+
+
+Telemetry = Scalars | Strips2D | Arrows2D | Boxes3D | Event | MapSnapshots | MapWinners
 
 
 @dataclass(frozen=True)

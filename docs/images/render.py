@@ -1,9 +1,12 @@
 """Render a run's recording in the Rerun web viewer, headless, and save screenshots of its layout.
 
     python docs/images/render.py RUN_DIR [--out docs/images] [--name quickstart] [--wait 40]
+    python docs/images/render.py RUN_DIR --name chapter5 --timelines trial sim_time
 
-For each of the ``trial`` and ``sim_time`` timelines: the default blueprint
-(:func:`sfl_brain.rrlog.blueprint`) with that timeline selected is written to a ``.rbl`` file,
+For each of the ``trial`` and ``sim_time`` timelines: the run's default blueprint
+(:func:`sfl_brain.rrlog.blueprint` with the run's layout, :func:`sfl_brain.rrlog.layout_of` of the scenario the run
+folder holds: the planar walker's, or the humanoid's of chapter 5) with that timeline selected is written to a
+``.rbl`` file,
 merged with the recording (whose own layout is only a default, so this one is shown), served over
 HTTP on 127.0.0.1 to the Rerun web viewer (``rerun --web-viewer``), and headless Chromium (software GL:
 ``--use-angle=swiftshader``), driven over its DevTools protocol, opens it and saves
@@ -36,7 +39,8 @@ from functools import partial
 from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
-from sfl_brain.rrlog import blueprint
+from sfl_brain.rrlog import blueprint, layout_of
+from sfl_brain.scenario import load
 
 
 class _Files(SimpleHTTPRequestHandler):
@@ -170,14 +174,15 @@ def screenshot(url: str, out: Path, wait: float, size=(1600, 1000)) -> None:
         shutil.rmtree(profile, ignore_errors=True)
 
 
-def render(rrd: Path, timeline: str, out: Path, wait: float) -> None:
-    """Serve ``rrd`` with the layout for ``timeline`` over HTTP, host the web viewer, screenshot it."""
+def render(rrd: Path, timeline: str, out: Path, wait: float, layout: dict | None = None) -> None:
+    """Serve ``rrd`` with the layout for ``timeline`` (``layout``: :func:`blueprint`'s arguments) over HTTP, host the
+    web viewer, screenshot it."""
     grpc, web, files = free_port(), free_port(), free_port()
     with tempfile.TemporaryDirectory() as tmp:
         # the recording with the layout for this timeline (active; the recording's own is a default)
-        layout, merged = Path(tmp) / "layout.rbl", Path(tmp) / "recording.rrd"
-        blueprint(timeline).save("sfl-brain", layout)
-        subprocess.run([*_rerun(), "rrd", "merge", str(rrd), str(layout), "-o", str(merged)], check=True)
+        layout_file, merged = Path(tmp) / "layout.rbl", Path(tmp) / "recording.rrd"
+        blueprint(timeline, **(layout or {})).save("sfl-brain", layout_file)
+        subprocess.run([*_rerun(), "rrd", "merge", str(rrd), str(layout_file), "-o", str(merged)], check=True)
         server = ThreadingHTTPServer(("127.0.0.1", files), partial(_Files, directory=tmp))
         threading.Thread(target=server.serve_forever, daemon=True).start()
         started = []
@@ -228,10 +233,12 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path(__file__).resolve().parent)
     parser.add_argument("--name", default="quickstart")
     parser.add_argument("--wait", type=float, default=40.0)
+    parser.add_argument("--timelines", nargs="+", default=["trial", "sim_time"], choices=["trial", "sim_time"])
     args = parser.parse_args()
-    for timeline in ("trial", "sim_time"):
+    layout = layout_of(load(args.run_dir / "scenario.yaml"))  # the layout the run itself sent
+    for timeline in args.timelines:
         out = args.out / f"{args.name}-{timeline}.png"
-        render(args.run_dir / "recording.rrd", timeline, out, args.wait)
+        render(args.run_dir / "recording.rrd", timeline, out, args.wait, layout)
         print(out)
 
 

@@ -69,7 +69,9 @@ caption; separate maps for flat, 10 deg up and 10 deg down, §5.7; switching whi
   half range over the module parameter ``switch_measure`` s from ``terrain_switch_after`` (§7.17's rule: mean +- 1.5 x
   half range of the gait before the terrain changes; detection starts once it is known). The thesis detects "when the
   torso reaches previously defined threshold" (L1759): a level, not a rising edge. On logged trials the switch is a
-  telemetry event ``events/terrain_switch``; the network keeps it (``network.terrain_switch_events``).
+  telemetry event ``events/terrain_switch``; the network keeps it (``network.terrain_switch_events``). On a logged
+  trial the threshold (``terrain_switch/band_low``, ``band_high``) and the switch (``terrain_switch/at``) are also
+  series in degrees, to be drawn over the body's torso pitch.
 
 On logged trials every neuron is shown on ``sim_time``: per joint and side (E, F) RG V and q, PF and MN, then the
 sensory neurons (``CPGNetwork.neuron_names``).
@@ -92,7 +94,7 @@ from sfl_brain.modules.cpg.circuit import Circuit, apply_overrides, circuit_path
 from sfl_brain.modules.cpg.patterns import PATTERN_POINTS
 from sfl_brain.registry import nearest
 from sfl_brain.scenario import ScenarioError
-from sfl_brain.telemetry import Event
+from sfl_brain.telemetry import Event, series
 
 #: what a trial may set (see the module docstring)
 TRIAL_PARAMS = (
@@ -469,7 +471,44 @@ class CPGController(Controller):
                 self.telemetry.emit(
                     Event("events/terrain_switch", trial_id, t0 + event.time, terrain_switch_text(event))
                 )
+            self._log_terrain_switch(trial_id, t0)
         super().flush_neurons()
+
+    #: the terrain switch's threshold and switch as series beside the body's torso pitch (deg), orange
+    SWITCH_COLOUR = (240, 140, 20)
+    BAND_STEP = 0.1  # s between two of the threshold's markers
+
+    def _log_terrain_switch(self, trial_id: int, t0: float) -> None:
+        """A logged trial's terrain switch (§5.8) as series in degrees, to be drawn over the body's ``torso/pitch``:
+        ``terrain_switch/band_low`` and ``band_high`` (the threshold, given or measured, from when it is known to the
+        trial's end, a marker every ``BAND_STEP`` s; one of them for "below" or "above") and ``terrain_switch/at`` (a
+        marker at the switch, at the watched input's value then)."""
+        known = self.network.terrain_threshold
+        if known is None:
+            return
+        # dotted (a marker every BAND_STEP s), so that one trial's band is not joined to the next logged trial's
+        span = t0 + np.arange(known.since, max(known.since, self.network.time) + 1e-9, self.BAND_STEP)
+        for name, edge in (("band_low", known.low), ("band_high", known.high)):
+            if np.isfinite(edge[0]):
+                value = np.full(len(span), math.degrees(float(edge[0])))
+                self.telemetry.emit(
+                    series(
+                        f"terrain_switch/{name}", trial_id, span, value, "deg", color=self.SWITCH_COLOUR, points=True
+                    )
+                )
+        fired = [e for e in self.network.terrain_switch_events if e.copies[0]]
+        if fired:
+            self.telemetry.emit(
+                series(
+                    "terrain_switch/at",
+                    trial_id,
+                    [t0 + fired[0].time],
+                    [math.degrees(float(np.ravel(fired[0].value)[0]))],
+                    "deg",
+                    color=self.SWITCH_COLOUR,
+                    points=True,
+                )
+            )
 
 
 def _check_trial_value(

@@ -203,6 +203,21 @@ class TerrainSwitchEvent:
         return self.time + self.seconds
 
 
+@dataclass(frozen=True)
+class TerrainThreshold:
+    """What an armed terrain switch watches for (§5.8), once known: from ``since`` s of CPG time on, the input ``input``
+    (rad for the torso pitch) at or below ``low``, at or above ``high``, or either ("outside"), per batch copy (NaN on
+    a side not watched). ``measured``: the window (start, end) in s the band was measured over (digest §7.17), or
+    None for a given threshold."""
+
+    input: str
+    when: str
+    since: float
+    low: np.ndarray
+    high: np.ndarray
+    measured: tuple[float, float] | None
+
+
 class _TerrainSwitch:
     """An armed terrain switch (``CPGNetwork.arm_terrain_switch``) and its progress per batch copy."""
 
@@ -587,6 +602,12 @@ class CPGNetwork:
         self._terrain = _TerrainSwitch(
             self, input, threshold, when, after, mode, seconds, gains or {}, sigma_s, sigma_joints, band, theta_mlr
         )
+        if band is None:  # a given threshold: known from the start
+            given = np.full(self.batch, float(threshold))
+            nan = np.full(self.batch, np.nan)
+            self.terrain_threshold = TerrainThreshold(
+                input, when, float(after), nan if when == "above" else given, given if when == "above" else nan, None
+            )
 
     def set_descending(self, alpha_mlr=None, theta_mlr=None, joints: list[str] | None = None) -> None:
         """Descending (MLR) control of the named joints' PF neurons (4.9); theta_MLR with the signs of §7.6."""
@@ -685,6 +706,8 @@ class CPGNetwork:
         self._rest_drive: np.ndarray | None = None  # MN_E - MN_F at rest on the first frame (set_gain_multiplier)
         #: the terrain switches so far (§5.8): at most one per copy and trial
         self.terrain_switch_events: list[TerrainSwitchEvent] = []
+        #: the armed terrain switch's threshold once known (given, or measured on the walk), kept after it fired
+        self.terrain_threshold: TerrainThreshold | None = None
         ns = len(self.sensor_names)
         self._sensory = np.zeros((b, ns))
         self._pf = np.zeros((b, self.n_neurons))
@@ -916,6 +939,15 @@ class CPGNetwork:
                 mean, half = ts.total / max(ts.count, 1), ts.band[0] * (ts.high - ts.low) / 2
                 ts.threshold = mean + half if ts.above else mean - half  # "outside": the lower edge here ...
                 ts.upper = mean + half  # ... and the upper one
+                nan = np.full(len(mean), np.nan)
+                self.terrain_threshold = TerrainThreshold(
+                    ts.input_name,
+                    ts.when,
+                    ts.measured_to,
+                    nan if ts.when == "above" else mean - half,
+                    nan if ts.when == "below" else mean + half,
+                    (ts.measured_from, ts.measured_to),
+                )
             return
         if self.time >= ts.after - 1e-9:
             value = phi[:, ts.input]
