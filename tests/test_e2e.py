@@ -234,7 +234,11 @@ def test_viewer_url_streams_live_and_the_run_folder_keeps_the_recording(tmp_path
         assert done.returncode == 0, done.stderr
     finally:
         os.killpg(server.pid, signal.SIGINT)  # as Ctrl-C in a terminal: the wrapper alone may not pass it on
-        server.wait(timeout=20)
+        try:
+            server.wait(timeout=20)
+        except subprocess.TimeoutExpired:  # on a loaded machine the server has outlived Ctrl-C (rerun 0.41); what
+            os.killpg(server.pid, signal.SIGKILL)  # it received is on disk already (--save streams, no footer)
+            server.wait(timeout=10)
     saved, streamed = rrd_rows(out / "recording.rrd"), rrd_rows(live)
     for counts in (saved, streamed):
         assert counts["/trials/success"] == 25 and counts["/acc/success_map/neurons"] >= 25
