@@ -7,7 +7,7 @@ vigilance (fixed at a value, or adaptive), the terrain (``conditions.body.slope_
 * one table row per run: its setting, status, successes, the success rate after 200 trials (L1707), N_s/N_f after 100
   trials and at the end (Fig. 5.11, 5.13), the best parameters (L1584), the success map's highest and lowest learnt
   efficiency, and the share of the unit cube the maps call success (closer to the success map than to the failure
-  map: the "success region", Fig. 5.12);
+  map, each counting its neurons that won a trial: the "success region", Fig. 5.12);
 * E5.1 (L1689-1707): with against without QARL on the same seed, flat ground, fixed vigilance: the ratio of the
   highest-efficiency success neuron (thesis +60%), of the lowest (+40%), of the number of successful trials (+16%);
 * E5.2 (L1726, L1755): N_s/N_f against the trial index, adaptive against fixed vigilance, flat and uphill;
@@ -266,7 +266,8 @@ def _e53(runs: list[Run]) -> list[str]:
     lines = [
         "### E5.3: the success region per terrain (adaptive vigilance, QARL)",
         "",
-        "The share of the unit cube (a 21^3 grid) nearer the success map than the failure map.",
+        "The share of the unit cube (a 21^3 grid) nearer the learnt success map than the learnt failure map "
+        "(each map's neurons that won at least one trial of their kind).",
         "",
         "| terrain | success region per seed | mean | successes per seed |",
         "|---|---|---|---|",
