@@ -1028,7 +1028,7 @@ def learnt_values(raw: dict, base_dir: Path) -> tuple[dict, list[Problem]]:
     runs = protocol.get("best_of") or {}
     if not isinstance(conditions, dict) or not isinstance(runs, dict):
         return raw, []
-    out, problems, found = copy.deepcopy(raw), [], {}
+    out, problems, found, missing = copy.deepcopy(raw), [], {}, set()
     for name, values in conditions.items():
         if not isinstance(values, dict):
             continue
@@ -1037,6 +1037,8 @@ def learnt_values(raw: dict, base_dir: Path) -> tuple[dict, list[Problem]]:
                 continue
             where = f"protocol.conditions.{name}.{key}"
             run, _, axis = value[1:].partition(".")
+            if run in missing:  # its folder's problem is said once
+                continue
             if run not in runs:
                 problems.append(
                     Problem(
@@ -1051,7 +1053,7 @@ def learnt_values(raw: dict, base_dir: Path) -> tuple[dict, list[Problem]]:
             best = found[run]
             if isinstance(best, str):
                 problems.append(Problem(f"protocol.best_of.{run}", best))
-                runs = {k: v for k, v in runs.items() if k != run}  # said once
+                missing.add(run)
                 continue
             if axis not in best:
                 problems.append(
@@ -1068,13 +1070,17 @@ def learnt_values(raw: dict, base_dir: Path) -> tuple[dict, list[Problem]]:
 
 def _best_of(folder: str, base_dir: Path) -> dict | str:
     """The physical best parameters (axis -> value) of the learn run in ``folder``, or why there are none."""
-    path = Path(str(folder))
+    given = path = Path(str(folder))
     try:
         if not path.is_absolute() and not path.is_dir():
             path = base_dir / path
         summary = json.loads((path / "summary.json").read_text())
     except (OSError, ValueError):
-        return f"expected a completed learn run's folder (with summary.json); {path} has none"
+        where = str(path) if given.is_absolute() else f"{given} (from here or from {base_dir})"
+        return (
+            f"expected a completed learn run's folder (with summary.json); {where} has none: run the learn run first "
+            "or point this key at one"
+        )
     if not isinstance(summary, dict) or summary.get("status") != "completed":
         return (
             f"expected a completed learn run; {path} is {summary.get('status') if isinstance(summary, dict) else '?'}"

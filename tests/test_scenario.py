@@ -59,6 +59,7 @@ def test_a_scenario_whose_learnt_runs_are_missing_says_which(tmp_path):
         assert f"protocol.best_of.{name}: expected a completed learn run's folder (with summary.json)" in str(
             info.value
         )
+    assert len(str(info.value).splitlines()) == 3  # each missing run said once, not again at every reference to it
 
 
 def test_bad_enum_names_file_path_expected_given_and_nearest(write_scenario):
