@@ -207,14 +207,10 @@ class Pair:
 
     def run(self, ticks: int, tick) -> float:
         """Seconds for ``ticks`` ticks: the body's work (``tick()``), the frame out, the command back."""
-        from sfl_brain.placement import pin, usable_cpus
+        from _common import Pinned
 
-        before = usable_cpus()
-        pin(self.mine)
-        try:
+        with Pinned(self.mine):
             return getattr(self, "_run_" + self.kind.partition("-")[0])(ticks, tick)
-        finally:
-            pin(before)
 
     def _run_pipe(self, ticks: int, tick) -> float:
         r, w, frame = self.r, self.w, b"f" * FRAME

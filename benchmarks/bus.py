@@ -41,21 +41,36 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _floor  # noqa: E402
-from _common import HostedPair  # noqa: E402
+from _common import HostedPair, Pinned  # noqa: E402
 
 from sfl_brain import bus  # noqa: E402
 from sfl_brain.body import InProcessLink  # noqa: E402
 from sfl_brain.host import BusLink  # noqa: E402
 from sfl_brain.messages import ControllerReset, SensorFrame  # noqa: E402
 from sfl_brain.modules.controllers.open_loop import OpenLoopController  # noqa: E402
-from sfl_brain.placement import pin, usable_cpus  # noqa: E402
+from sfl_brain.placement import usable_cpus  # noqa: E402
 
 SENSORS = ["hip_l", "hip_r", "knee_l", "knee_r", "contact_l", "contact_r", "slope", "pitch"]
 COMMANDS = ["v_hip_l", "v_hip_r", "v_knee_l", "v_knee_r"]
 RESET = ControllerReset(trial_id=0, seed=0, params={}, sensors=SENSORS, commands=COMMANDS)
 
 
-class OneProcess:
+class _Side:
+    """The body's end of a lockstep pair: ``link`` (an ``InProcessLink`` or a ``BusLink``) stepped ``ticks`` times on
+    ``mine`` (cores; None: not pinned), each tick's body work ``tick()`` first."""
+
+    def run(self, ticks: int, tick) -> float:
+        with Pinned(self.mine):
+            step, values = self.link.step, self.values
+            t = time.perf_counter()
+            for _ in range(ticks):
+                tick()
+                step(SensorFrame(trial_id=0, tick=self.tick, values=values))
+                self.tick += 1
+            return time.perf_counter() - t
+
+
+class OneProcess(_Side):
     """The body's work, then the open-loop controller through InProcessLink, on ``cores`` (the pair's core,
     so that both meet the same neighbours on a busy machine; None: not pinned)."""
 
@@ -66,25 +81,11 @@ class OneProcess:
         self.values = np.zeros(len(SENSORS))
         self.tick = 0
 
-    def run(self, ticks: int, tick) -> float:
-        before = usable_cpus()
-        pin(self.mine)
-        try:
-            step, values = self.link.step, self.values
-            t = time.perf_counter()
-            for _ in range(ticks):
-                tick()
-                step(SensorFrame(trial_id=0, tick=self.tick, values=values))
-                self.tick += 1
-            return time.perf_counter() - t
-        finally:
-            pin(before)
-
     def close(self) -> None:
         pass
 
 
-class Framework:
+class Framework(_Side):
     """This process as the body: ``BusLink`` to an open-loop controller hosted by ``sfl_brain.host``,
     placed as ``lockstep.pin_cpus`` ``placement`` says, ticks on the lockstep ``link`` or the mesh."""
 
@@ -105,20 +106,6 @@ class Framework:
         self.link.reset(RESET)
         self.values = np.zeros(len(SENSORS))
         self.tick = 0
-
-    def run(self, ticks: int, tick) -> float:
-        before = usable_cpus()
-        pin(self.mine)
-        try:
-            step, values = self.link.step, self.values
-            t = time.perf_counter()
-            for _ in range(ticks):
-                tick()
-                step(SensorFrame(trial_id=0, tick=self.tick, values=values))
-                self.tick += 1
-            return time.perf_counter() - t
-        finally:
-            pin(before)
 
     def close(self) -> None:
         self.link.close()
