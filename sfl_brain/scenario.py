@@ -1028,7 +1028,7 @@ def learnt_values(raw: dict, base_dir: Path) -> tuple[dict, list[Problem]]:
     runs = protocol.get("best_of") or {}
     if not isinstance(conditions, dict) or not isinstance(runs, dict):
         return raw, []
-    out, problems, found, missing = copy.deepcopy(raw), [], {}, set()
+    out, problems, found = copy.deepcopy(raw), [], {}
     for name, values in conditions.items():
         if not isinstance(values, dict):
             continue
@@ -1037,8 +1037,6 @@ def learnt_values(raw: dict, base_dir: Path) -> tuple[dict, list[Problem]]:
                 continue
             where = f"protocol.conditions.{name}.{key}"
             run, _, axis = value[1:].partition(".")
-            if run in missing:  # its folder's problem is said once
-                continue
             if run not in runs:
                 problems.append(
                     Problem(
@@ -1050,10 +1048,10 @@ def learnt_values(raw: dict, base_dir: Path) -> tuple[dict, list[Problem]]:
                 continue
             if run not in found:
                 found[run] = _best_of(runs[run], base_dir)
+                if isinstance(found[run], str):  # why the folder gives no parameters: said once, at its first use
+                    problems.append(Problem(f"protocol.best_of.{run}", found[run]))
             best = found[run]
             if isinstance(best, str):
-                problems.append(Problem(f"protocol.best_of.{run}", best))
-                missing.add(run)
                 continue
             if axis not in best:
                 problems.append(

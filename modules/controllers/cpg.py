@@ -65,9 +65,9 @@ caption; separate maps for flat, 10 deg up and 10 deg down, §5.7; switching whi
   gait, §7.17); it fires once, the first tick at or after the module parameter ``terrain_switch_after`` (s: the
   start-up transient must not fire it) when the input ``terrain_input`` (the torso pitch, rad) is at or ``switch_when``
   ("above", "below"; "outside": out of the measured band either way) ``switch_threshold`` (rad), or a threshold the
-  walk itself measures: ``switch_band`` k, the input's mean +- k x its
-  half range over the module parameter ``switch_measure`` s from ``terrain_switch_after`` (§7.17's rule: mean +- 1.5 x
-  half range of the gait before the terrain changes; detection starts once it is known). The thesis detects "when the
+  walk itself measures: ``switch_band`` k, the input's mean +- k x its half range over the module parameter
+  ``switch_measure`` s from ``terrain_switch_after`` (§7.17's rule: mean +- 1.5 x half range of the gait before the
+  terrain changes; detection starts once it is known). The thesis detects "when the
   torso reaches previously defined threshold" (L1759): a level, not a rising edge. On logged trials the switch is a
   telemetry event ``events/terrain_switch``; the network keeps it (``network.terrain_switch_events``). On a logged
   trial the threshold (``terrain_switch/band_low``, ``band_high``) and the switch (``terrain_switch/at``) are also
