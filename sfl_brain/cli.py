@@ -142,66 +142,152 @@ def run_command(
     exit_process(summary["exit_code"])
 
 
+def _study_options(command):
+    """--k, --distinct and --window: what the study report measures (``sfl study`` and ``sfl report``)."""
+    from .metrics import DISTINCT, K_GOOD
+    from .report_study import WINDOW
+
+    command = click.option(
+        "--window", type=int, default=WINDOW, show_default=True, help="trials in the success rate's moving window"
+    )(command)
+    command = click.option(
+        "--distinct",
+        type=float,
+        default=DISTINCT,
+        show_default=True,
+        help="distance (unit cube) from every good gait before it that makes a success a new good gait",
+    )(command)
+    return click.option(
+        "--k", "k", type=int, default=K_GOOD, show_default=True, help="count failures before K distinct good gaits"
+    )(command)
+
+
+def _study_settings(k: int, distinct: float, window: int, absent: dict | None = None):
+    """The study report's settings, or exit 2 in one line on a value out of range."""
+    from .report_study import StudySettings
+
+    checks = (("--k", k, k >= 1), ("--distinct", distinct, distinct > 0), ("--window", window, window >= 1))
+    for name, value, ok in checks:
+        if not ok:
+            click.echo(f"sfl: {name} {value}: expected more than 0", err=True)
+            sys.exit(EXIT_BAD_INPUT)
+    return StudySettings(k=k, distinct=distinct, window=window, absent=absent or {})
+
+
 @main.command()
 @click.argument("scenario", type=click.Path(dir_okay=False))
 @click.option("--vary", "vary", multiple=True, metavar="KEY.PATH=V1,V2,...", help="values to run (one run each)")
 @click.option("--seeds", default="", metavar="S1,S2,...", help="seeds to run each value with")
 @click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE", help="override for every run")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True, help="study folder")
-@click.option("--quiet", is_flag=True, help="no progress bar")
-def study(scenario, vary, seeds, overrides, out, quiet) -> None:
+@click.option("--jobs", type=int, default=1, show_default=True, help="runs at once on this machine")
+@click.option(
+    "--cluster",
+    default=None,
+    metavar="ADDRESS",
+    help="run on a Dask cluster: its scheduler's address (tcp://host:port) or scheduler file (sfl-brain[cluster])",
+)
+@_study_options
+@click.option("--quiet", is_flag=True, help="plain lines instead of the progress view")
+def study(scenario, vary, seeds, overrides, out, jobs, cluster, k, distinct, window, quiet) -> None:
     """Run SCENARIO once per combination of --vary values and --seeds, then report them together.
 
-    Every combination is checked before the first run starts. Runs go to OUT/<name>; the
-    figures and the table (with success rate against vigilance) go to OUT/report. A run that did
-    not complete (stalled, failed) is marked in the table and left out of every mean. The exit
-    code is the worst run's: 1 if any failed, else 3 if any stalled.
+    Every combination is checked before the first run starts. Runs go to OUT/<name> (--jobs at once, or as tasks
+    on a Dask cluster with --cluster); the figures and the table go to OUT/report: the groups of runs (by what was
+    varied) compared on learning curves and failures before K good gaits, and the success rate against vigilance.
+    Run again, the study keeps every run that ended completed or stalled and runs the others again from scratch
+    (their old folders moved to OUT/attempts/). A run that did not complete is named at the end, marked in the
+    report and left out of every mean. The exit code is the worst run's: 1 if any failed, else 3 if any stalled;
+    130 when interrupted (run the same command to resume).
     """
-    import itertools
-
-    from .progress import ProgressView
     from .report import write_report
-    from .run import run
+    from .study import (
+        FINAL,
+        DaskRunner,
+        LocalRunner,
+        StudyInterrupted,
+        StudyView,
+        connect,
+        kept_outcomes,
+        plan_study,
+        run_study,
+        triage,
+        write_manifest,
+    )
 
-    axes = []
-    for item in vary:
-        key, sep, values = item.partition("=")
-        if not sep or not values:
-            click.echo(f"sfl: --vary {item!r}: expected KEY.PATH=V1,V2,...", err=True)
-            sys.exit(EXIT_BAD_INPUT)
-        axes.append([(key, v) for v in values.split(",")])
-    try:
-        seed_list = [int(x) for x in seeds.split(",") if x.strip()] or [None]
-    except ValueError:
-        click.echo(f"sfl: --seeds {seeds!r}: expected integers separated by commas", err=True)
+    if jobs < 1:
+        click.echo(f"sfl: --jobs {jobs}: expected 1 or more runs at once", err=True)
         sys.exit(EXIT_BAD_INPUT)
-    runs = []
-    for combo in itertools.product(*axes):
-        for seed in seed_list:
-            sets = [*overrides, *(f"{k}={v}" for k, v in combo)]
-            name = "_".join(f"{k.rsplit('.', 1)[-1]}{v}" for k, v in combo) or "run"
-            name += "" if seed is None else f"_seed{seed}"
-            runs.append((name, _load_or_exit(scenario, sets, seed)))
-    click.echo(f"sfl: study of {len(runs)} runs into {out}")
-    done: list[Path] = []
+    ctx = click.get_current_context()
+    if cluster is not None and ctx.get_parameter_source("jobs") != click.core.ParameterSource.DEFAULT:
+        click.echo("sfl: --jobs and --cluster: choose one (a cluster runs as many at once as it has threads)", err=True)
+        sys.exit(EXIT_BAD_INPUT)
+    _study_settings(k, distinct, window)  # checked before anything runs
+    try:
+        planned = plan_study(scenario, vary, seeds, overrides)
+    except BadInput as exc:
+        click.echo(f"sfl: {exc}", err=True)
+        sys.exit(EXIT_BAD_INPUT)
+    except ScenarioError as exc:
+        click.echo(f"sfl: invalid scenario\n{exc}", err=True)
+        sys.exit(EXIT_BAD_INPUT)
+    runs = [run for run, _ in planned]
+    runner = (
+        DaskRunner(_start_or_exit(lambda: connect(cluster)), out, {r.name: p for r, p in planned})
+        if cluster is not None
+        else LocalRunner(scenario, out, jobs)
+    )
+    try:
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            click.echo(f"sfl: cannot write the study folder {out}: {exc.strerror or exc}", err=True)
+            sys.exit(EXIT_ENVIRONMENT)
+        held = _start_or_exit(lambda: triage(out, planned))
+        kept = kept_outcomes(out, held.kept)
+        command = {
+            "scenario": str(scenario),
+            "vary": list(vary),
+            "seeds": seeds,
+            "set": list(overrides),
+            "k": k,
+            "distinct": distinct,
+            "window": window,
+        }
+        write_manifest(out, command, runs, kept)
+        click.echo(
+            f"sfl: study of {len(runs)} runs into {out}: {len(held.todo)} to run ({runner.describe()})"
+            + (f", {len(kept)} kept from before (completed or stalled)" if kept else "")
+        )
+        for name, status, where in held.moved:
+            click.echo(f"sfl: {name} was {status}: its folder moved to {where}; it runs again from scratch")
+        interrupted = None
+        with StudyView(runs, kept, quiet) as view:
+            try:
+                outcomes = run_study(held.todo, runner, view.show)
+            except StudyInterrupted as stop:
+                outcomes, interrupted = stop.outcomes, stop
+    finally:
+        runner.close()
+    outcomes = {**kept, **outcomes}
+    write_manifest(out, command, runs, outcomes)
+    if interrupted is not None:
+        stopped = [r.name for r in runs if r.name not in outcomes or outcomes[r.name].status not in FINAL]
+        click.echo(
+            f"sfl: study interrupted; {len(runs) - len(stopped)} of {len(runs)} runs are done and kept. The same "
+            f"command resumes it: the {len(stopped)} others run again from scratch ({', '.join(stopped)})",
+            err=True,
+        )
+        exit_process(EXIT_CODES[RunStatus.INTERRUPTED])
+    folders = [out / r.name for r in runs if (out / r.name / "scenario.yaml").exists()]
+    absent = {r.name: outcomes[r.name].reason for r in runs if out / r.name not in folders}
+    if folders:
+        path = write_report(folders, out / "report", study=_study_settings(k, distinct, window, absent))
+        click.echo(f"sfl: report written to {path}")
     unfinished: dict[str, list[str]] = {}
-    for i, (name, plan) in enumerate(runs, 1):
-        view = ProgressView(plan, enabled=not quiet)
-        click.echo(f"sfl: [{i}/{len(runs)}] {name}")
-        with view:
-            run_dir, summary = _start_or_exit(
-                lambda plan=plan, name=name, view=view: run(
-                    plan, out / name, on_progress=view.update, on_ready=lambda sup, s, v=view: v.ready(s)
-                )
-            )
-        view.report(run_dir, summary)
-        if summary["status"] == RunStatus.INTERRUPTED:
-            exit_process(summary["exit_code"])
-        done.append(run_dir)
-        if summary["status"] != RunStatus.COMPLETED:
-            unfinished.setdefault(summary["status"], []).append(name)
-    path = write_report(done, out / "report")
-    click.echo(f"sfl: report written to {path}")
+    for run in runs:
+        if outcomes[run.name].status != RunStatus.COMPLETED:
+            unfinished.setdefault(outcomes[run.name].status, []).append(run.name)
     for status, names in unfinished.items():
         click.echo(
             f"sfl: {len(names)} of {len(runs)} runs {status}, marked in the report and left out of its means: "
@@ -336,21 +422,47 @@ def worker(scenario, connect, run_id, name, overrides, seed, secret_file, wait, 
 
 @main.command()
 @click.argument("run_dirs", nargs=-1, required=True, type=click.Path(file_okay=False, path_type=Path))
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("docs/results"))
-def report(run_dirs, out) -> None:
-    """Write the figures (PNG) and a Markdown table of RUN_DIRS to OUT."""
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="where to write (default: STUDY_DIR/report for one study folder, else docs/results)",
+)
+@_study_options
+def report(run_dirs, out, k, distinct, window) -> None:
+    """Write the figures (PNG) and a Markdown table of RUN_DIRS to OUT.
+
+    A study folder (made by sfl study) stands for its runs, and the page starts with the study's groups compared
+    (learning curves, failures before K good gaits, a table of means with 95 % intervals)."""
     from .records import run_status
     from .report import write_report
+    from .report_study import is_study, study_runs
 
+    folders, absent, studies = [], {}, []
     for run_dir in run_dirs:
-        if not (run_dir / "scenario.yaml").exists():
-            click.echo(f"sfl: {run_dir}: no scenario.yaml (is this a run folder?)", err=True)
+        if run_dir.is_dir() and is_study(run_dir):
+            found, missing = study_runs(run_dir)
+            folders += found
+            absent.update(missing)
+            studies.append(run_dir)
+            if not found:
+                click.echo(f"sfl: {run_dir}: a study folder with no run folder in it", err=True)
+                sys.exit(EXIT_BAD_INPUT)
+        elif not (run_dir / "scenario.yaml").exists():
+            click.echo(f"sfl: {run_dir}: no scenario.yaml (is this a run folder or a study folder?)", err=True)
             sys.exit(EXIT_BAD_INPUT)
-    for run_dir in run_dirs:
+        else:
+            folders.append(run_dir)
+    settings = _study_settings(k, distinct, window, absent) if studies else None
+    if out is None:
+        out = studies[0] / "report" if len(studies) == 1 and len(run_dirs) == 1 else Path("docs/results")
+    for run_dir in folders:
         status, why = run_status(run_dir)
         if status != RunStatus.COMPLETED:
             click.echo(f"sfl: {run_dir} is {status} ({why}): marked in the report, left out of its means", err=True)
-    path = write_report(list(run_dirs), out)
+    for name, why in absent.items():
+        click.echo(f"sfl: {name} has no run folder ({why}): named in the report, left out of its means", err=True)
+    path = write_report(folders, out, study=settings)
     click.echo(f"sfl: report written to {path}")
 
 

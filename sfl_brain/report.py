@@ -33,6 +33,7 @@ from .records import read_records, run_status, summarise  # noqa: E402
 from .report_ch5 import ch5_sections, is_ch5_run  # noqa: E402
 from .report_conditions import conditions_section, is_conditions_run  # noqa: E402
 from .report_cpg import cpg_run, is_cpg_run, write_cpg_sections  # noqa: E402
+from .report_study import StudySettings, study_section  # noqa: E402
 from .report_sweep import is_grid_sweep, sweep_section  # noqa: E402
 
 
@@ -158,7 +159,9 @@ def made_by(run_dirs: list[Path]) -> str:
     return text + (f"; {unknown} runs have no provenance.json." if unknown else ".")
 
 
-def write_report(run_dirs: list[Path], out: Path) -> Path:
+def write_report(run_dirs: list[Path], out: Path, study: StudySettings | None = None) -> Path:
+    """Write the page, its figures and ``summary.json`` for ``run_dirs`` into ``out``; with ``study``, the runs are a
+    study's, and the page starts with its groups compared (:mod:`.report_study`, numbers in ``study_summary.json``)."""
     out.mkdir(parents=True, exist_ok=True)
     groups: dict[str, list[tuple[float, float, int]]] = {}
     group_thesis: dict[str, dict] = {}
@@ -255,6 +258,11 @@ def write_report(run_dirs: list[Path], out: Path) -> Path:
             "they are shown but enter no mean.\n\n"
         )
     head += made_by(run_dirs) + "\n\n"
+    if study is not None:
+        study_lines, numbers = study_section(run_dirs, out, study)
+        if study_lines:
+            head += "\n".join(study_lines) + "\n\n## Runs\n\n"
+            (out / "study_summary.json").write_text(json.dumps(numbers, indent=1) + "\n")
     path = out / (f"{stem}.md" if stem else "README.md")
     path.write_text(head + "\n".join(lines + vigilance_lines) + "\n")
     (out / (f"{stem}_summary.json" if stem else "summary.json")).write_text(
