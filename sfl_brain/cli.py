@@ -162,7 +162,7 @@ def _study_options(command):
     )(command)
 
 
-def _study_settings(k: int, distinct: float, window: int, absent: dict | None = None):
+def _study_settings(k: int, distinct: float, window: int, said: dict | None = None):
     """The study report's settings, or exit 2 in one line on a value out of range."""
     from .report_study import StudySettings
 
@@ -171,7 +171,7 @@ def _study_settings(k: int, distinct: float, window: int, absent: dict | None = 
         if not ok:
             click.echo(f"sfl: {name} {value}: expected more than 0", err=True)
             sys.exit(EXIT_BAD_INPUT)
-    return StudySettings(k=k, distinct=distinct, window=window, absent=absent or {})
+    return StudySettings(k=k, distinct=distinct, window=window, said=said or {})
 
 
 @main.command()
@@ -280,9 +280,9 @@ def study(scenario, vary, seeds, overrides, out, jobs, cluster, k, distinct, win
         )
         exit_process(EXIT_CODES[RunStatus.INTERRUPTED])
     folders = [out / r.name for r in runs if (out / r.name / "scenario.yaml").exists()]
-    absent = {r.name: outcomes[r.name].reason for r in runs if out / r.name not in folders}
+    said = {n: f"{o.status}: {o.reason}" for n, o in outcomes.items() if o.status != RunStatus.COMPLETED}
     if folders:
-        path = write_report(folders, out / "report", study=_study_settings(k, distinct, window, absent))
+        path = write_report(folders, out / "report", study=_study_settings(k, distinct, window, said))
         click.echo(f"sfl: report written to {path}")
     unfinished: dict[str, list[str]] = {}
     for run in runs:
@@ -438,12 +438,12 @@ def report(run_dirs, out, k, distinct, window) -> None:
     from .report import write_report
     from .report_study import is_study, study_runs
 
-    folders, absent, studies = [], {}, []
+    folders, said, studies = [], {}, []
     for run_dir in run_dirs:
         if run_dir.is_dir() and is_study(run_dir):
-            found, missing = study_runs(run_dir)
+            found, seen = study_runs(run_dir)
             folders += found
-            absent.update(missing)
+            said.update(seen)
             studies.append(run_dir)
             if not found:
                 click.echo(f"sfl: {run_dir}: a study folder with no run folder in it", err=True)
@@ -453,15 +453,15 @@ def report(run_dirs, out, k, distinct, window) -> None:
             sys.exit(EXIT_BAD_INPUT)
         else:
             folders.append(run_dir)
-    settings = _study_settings(k, distinct, window, absent) if studies else None
+    settings = _study_settings(k, distinct, window, said) if studies else None
     if out is None:
         out = studies[0] / "report" if len(studies) == 1 and len(run_dirs) == 1 else Path("docs/results")
     for run_dir in folders:
         status, why = run_status(run_dir)
         if status != RunStatus.COMPLETED:
             click.echo(f"sfl: {run_dir} is {status} ({why}): marked in the report, left out of its means", err=True)
-    for name, why in absent.items():
-        click.echo(f"sfl: {name} has no run folder ({why}): named in the report, left out of its means", err=True)
+    for name in set(said) - {f.name for f in folders}:
+        click.echo(f"sfl: {name} has no run folder ({said[name]}): named in the report, in none of its means", err=True)
     path = write_report(folders, out, study=settings)
     click.echo(f"sfl: report written to {path}")
 

@@ -56,8 +56,9 @@ class StudySettings:
     k: int = K_GOOD
     distinct: float = DISTINCT
     window: int = WINDOW
-    #: runs of the study that have no run folder, and why (e.g. a Dask task whose worker died)
-    absent: dict[str, str] = field(default_factory=dict)
+    #: how the study saw the runs that did not complete (``status: reason``), those without a run folder too (e.g. a
+    #: Dask task whose workers died)
+    said: dict[str, str] = field(default_factory=dict)
 
 
 # --------------------------------------------------------------------------- statistics
@@ -362,11 +363,14 @@ def study_section(run_dirs: list[Path], out: Path, settings: StudySettings) -> t
         lines += [*group_table(shown, settings), "", *[f"![]({f})" for f in figures]]
     else:
         lines.append("No run completed: nothing to compare.")
-    absent = {n: why for n, why in settings.absent.items() if n not in metrics}
+    absent = {n: why for n, why in settings.said.items() if n not in metrics}
     if left_out or absent:
         count = len(left_out) + len(absent)
         lines += ["", f"Left out of every curve, box and mean: {count} runs that did not complete:", ""]
-        lines += [f"- {m.name}: {m.status}, {m.reason or 'no trial'}" for m in left_out]
+        for m in left_out:
+            study = settings.said.get(m.name, "")
+            study = f" (the study: {study})" if study else ""
+            lines.append(f"- {m.name}: {m.status}, {m.reason or 'no trial'}{study}")
         lines += [f"- {name}: no run folder, {why}" for name, why in absent.items()]
     numbers = {
         "k": settings.k,
@@ -403,8 +407,8 @@ def is_study(folder: Path) -> bool:
 
 
 def study_runs(folder: Path) -> tuple[list[Path], dict[str, str]]:
-    """A study folder's run folders (in the study's order) and its runs without one, with why (from
-    ``study.json``)."""
+    """A study folder's run folders (in the study's order), and how the study saw each run that did not complete,
+    those without a folder too (from ``study.json``)."""
     from .study import read_manifest
 
     folder = Path(folder)
@@ -413,5 +417,10 @@ def study_runs(folder: Path) -> tuple[list[Path], dict[str, str]]:
     found = {c.name: c for c in folder.iterdir() if c.is_dir() and (c / "scenario.yaml").exists()}
     order = [n for n in planned if n in found] + sorted(n for n in found if n not in planned)
     outcomes = manifest.get("outcomes", {})
-    absent = {n: outcomes.get(n, {}).get("reason") or "never run" for n in planned if n not in found}
-    return [found[n] for n in order], absent
+    said = {
+        n: f"{o.get('status')}: {o.get('reason')}"
+        for n, o in outcomes.items()
+        if n in planned and o.get("status") != "completed"
+    }
+    said.update({n: "never run" for n in planned if n not in found and n not in said})
+    return [found[n] for n in order], said

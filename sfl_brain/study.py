@@ -560,7 +560,8 @@ def connect(address: str, timeout: float = CONNECT_TIMEOUT):
             return distributed.Client(scheduler_file=address, timeout=timeout, set_as_default=False)
         return distributed.Client(address, timeout=timeout, set_as_default=False)
     except (OSError, TimeoutError) as exc:
-        raise BadInput(f"{what}: no Dask scheduler answered within {timeout:g} s ({type(exc).__name__})") from None
+        said = str(exc).splitlines()[0][:160] if str(exc) else type(exc).__name__
+        raise BadInput(f"{what}: no Dask scheduler answered within {timeout:g} s ({said})") from None
     except (ValueError, TypeError) as exc:
         raise BadInput(f"{what}: not a Dask scheduler address or scheduler file ({exc})") from None
 
@@ -577,6 +578,7 @@ class DaskRunner:
         self.futures: dict[str, object] = {}
         self.started: dict[str, tuple[float, str]] = {}
         self.trials: dict[str, int] = {}
+        self.cancelled: set[str] = set()
         client.subscribe_topic(self.topic, lambda event: self.inbox.put(("event", event[1])))
 
     def describe(self) -> str:
@@ -627,9 +629,12 @@ class DaskRunner:
     def _collect(self, name: str) -> Outcome:
         future = self.futures.pop(name)
         began, where = self.started.get(name, (time.monotonic(), "a Dask worker"))
+        if name in self.cancelled:
+            future.release()
+            return Outcome(str(RunStatus.INTERRUPTED), "stopped before it started", None, 0, None, where)
         try:
             result = future.result()
-        except BaseException as exc:  # noqa: BLE001 - the task failed, was cancelled or its workers died
+        except BaseException as exc:  # noqa: BLE001 - the task failed or its workers died
             if isinstance(exc, KeyboardInterrupt):
                 raise
             reason = f"the Dask task failed on {where}: {type(exc).__name__}: {exc}"
@@ -637,7 +642,7 @@ class DaskRunner:
         finally:
             future.release()
         if result["files"] is None:
-            return Outcome("interrupted", "stopped before it started", None, 0, None, result["where"])
+            return Outcome(str(RunStatus.INTERRUPTED), "stopped before it started", None, 0, None, result["where"])
         incoming = self.out / f".incoming-{name}"
         shutil.rmtree(incoming, ignore_errors=True)
         untar(result["files"], incoming)
@@ -649,8 +654,8 @@ class DaskRunner:
         from distributed import Event
 
         Event(self.stop_name, client=self.client).set()
-        waiting = [f for n, f in self.futures.items() if n not in self.started]
-        self.client.cancel(waiting)
+        self.cancelled = {n for n in self.futures if n not in self.started}
+        self.client.cancel([self.futures[n] for n in self.cancelled])
         deadline = time.monotonic() + STOP_GRACE + 10.0
         while self.futures and time.monotonic() < deadline:
             try:
@@ -681,21 +686,23 @@ class StudyInterrupted(Exception):
 
 
 @contextlib.contextmanager
-def sigterm_as_interrupt() -> Iterator[None]:
-    """While in the block, SIGTERM stops the study as Ctrl-C does (main thread only)."""
+def stop_on_signals() -> Iterator[None]:
+    """While in the block, Ctrl-C and SIGTERM stop the study (KeyboardInterrupt in the main thread), also where
+    SIGINT came ignored (a study started in the background by a shell)."""
 
-    def on_term(signum, frame):
+    def on_signal(signum, frame):
         raise KeyboardInterrupt
 
     try:
-        previous = signal.signal(signal.SIGTERM, on_term)
+        previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     except ValueError:  # not the main thread
         yield
         return
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 def run_study(todo: list[StudyRun], runner, show: Callable[[StudyEvent], None]) -> dict[str, Outcome]:
@@ -710,7 +717,7 @@ def run_study(todo: list[StudyRun], runner, show: Callable[[StudyEvent], None]) 
                 outcomes[event.name] = event.outcome
             show(event)
 
-    with sigterm_as_interrupt():
+    with stop_on_signals():
         try:
             while waiting or runner.busy():
                 while waiting and runner.has_room():

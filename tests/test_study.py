@@ -1,0 +1,243 @@
+"""``sfl study``: the study report's maths, and studies of real runs over processes (``--jobs``)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+import psutil
+import pytest
+from scipy import stats
+
+from sfl_brain.report_study import band, group_runs, moving_success_rate, short_names, t_interval, varied_keys
+from sfl_brain.status import BadInput
+from sfl_brain.study import TrialCounter, core_slots, first_difference, parse_seeds, parse_vary
+
+from .conftest import ROOT, SCENARIOS, sfl, wait_for_trials
+
+LEARN = SCENARIOS / "analytic_learn.yaml"
+
+
+# --------------------------------------------------------------------------- the maths
+def test_t_interval_is_the_two_sided_95_percent_t_interval_of_the_mean():
+    mean, half, n = t_interval([1.0, 2.0, 3.0, 4.0])
+    assert (mean, n) == (2.5, 4)
+    assert half == pytest.approx(3.182446 * np.std([1, 2, 3, 4], ddof=1) / 2, rel=1e-6)  # t(0.975, 3) = 3.1824
+    assert t_interval([5.0, None, float("nan")])[:2] == (5.0, pytest.approx(float("nan"), nan_ok=True))
+    assert t_interval([])[2] == 0
+
+
+def test_t_interval_covers_the_true_mean_95_times_in_100():
+    rng = np.random.default_rng(3)
+    covered = 0
+    for _ in range(2000):
+        mean, half, _ = t_interval(rng.normal(10.0, 2.0, size=3))
+        covered += abs(mean - 10.0) <= half
+    assert covered / 2000 == pytest.approx(0.95, abs=0.015)
+
+
+def test_band_is_the_trial_by_trial_interval_over_the_seeds_that_have_a_value():
+    curves = [np.array([np.nan, 1.0, 2.0, 9.0]), np.array([0.0, 3.0, 4.0]), np.array([np.nan, 5.0, 6.0])]
+    mean, lo, hi = band(curves)
+    assert len(mean) == 3  # the trials every seed has
+    assert mean[0] == 0.0 and np.isnan(lo[0]) and np.isnan(hi[0])  # one value: no interval
+    assert mean[1] == 3.0
+    half = stats.t.ppf(0.975, 2) * 2.0 / np.sqrt(3)
+    assert hi[1] - mean[1] == pytest.approx(half) and mean[1] - lo[1] == pytest.approx(half)
+
+
+def test_success_rate_over_a_moving_window_of_trials():
+    assert moving_success_rate([1, 0, 1, 1, 0], 2).tolist() == [1.0, 0.5, 0.5, 1.0, 0.5]
+    assert moving_success_rate([1, 0, 1], 10).tolist() == pytest.approx([1.0, 0.5, 2 / 3])
+    assert len(moving_success_rate([], 5)) == 0
+
+
+def test_runs_are_grouped_by_what_differs_but_the_seed():
+    def scenario(value, seed, kind="sfl"):
+        return {
+            "name": "s",
+            "seed": seed,
+            "protocol": {"kind": "learn", "trials": 30, "proposer": {"kind": kind}},
+            "modules": {"vigilance": {"params": {"value": value}}, "acc": {"params": {"value": 1}}},
+        }
+
+    made = [(0, 0, "sfl"), (0, 1, "sfl"), (0.1, 0, "random")]
+    runs = {f"r{i}": scenario(value, seed, kind) for i, (value, seed, kind) in enumerate(made)}
+    assert varied_keys(list(runs.values())) == ["protocol.proposer.kind", "modules.vigilance.params.value"]
+    assert group_runs(runs) == {"kind=sfl, value=0": ["r0", "r1"], "kind=random, value=0.1": ["r2"]}
+    assert group_runs({"a": scenario(0, 0), "b": scenario(0, 1)}) == {"all runs": ["a", "b"]}
+    # a key's shortest tail that no other varied key ends with
+    assert short_names(["modules.acc.params.value", "modules.vigilance.params.value", "seedless"]) == {
+        "modules.acc.params.value": "acc.params.value",
+        "modules.vigilance.params.value": "vigilance.params.value",
+        "seedless": "seedless",
+    }
+
+
+def test_each_job_gets_its_own_cores():
+    assert core_slots([0, 1], 2) == [[0], [1]]
+    assert core_slots([0, 1, 2, 3], 2) == [[0, 1], [2, 3]]
+    assert core_slots([0, 1, 2], 2) == [[0], [1, 2]]
+    assert core_slots([0, 1], 3) == [[0], [1], [0]]  # more jobs than cores: a core each in turn
+    assert core_slots([0, 1], 1) == [None]  # one job: every usable core, as sfl run alone
+    assert core_slots([], 2) == [None, None]  # no CPU affinity on this OS
+
+
+def test_bad_study_options_are_named():
+    with pytest.raises(BadInput, match=r"^--vary 'x': expected KEY.PATH=V1,V2,...$"):
+        parse_vary(["x"])
+    with pytest.raises(BadInput, match=r"^--vary a.b: 1 given twice$"):
+        parse_vary(["a.b=1,2,1"])
+    with pytest.raises(BadInput, match=r"^--seeds '1,x': expected integers separated by commas$"):
+        parse_seeds("1,x")
+    assert parse_seeds("") == [None] and parse_seeds("0, 2") == [0, 2]
+
+
+def test_trials_so_far_are_read_from_whole_lines_only(tmp_path):
+    path = tmp_path / "records.jsonl"
+    counter = TrialCounter(path)
+    assert not counter.poll()  # no file yet
+    path.write_bytes(b'{"kind":"decision","go":true}\n{"kind":"trial","success":true}\n{"kind":"tri')
+    assert counter.poll() and (counter.trials, counter.successes) == (1, 1)
+    with open(path, "ab") as f:
+        f.write(b'al","success":false}\n')
+    assert counter.poll() and (counter.trials, counter.successes) == (2, 1)
+    assert not counter.poll()
+
+
+def test_first_difference_names_the_key_path():
+    assert first_difference({"a": {"b": 1, "c": 2}}, {"a": {"b": 1, "c": 3}}) == "a.c"
+    assert first_difference({"a": 1}, {"a": 1, "z": 0}) == "z"
+    assert first_difference({"a": [1]}, {"a": [1]}) is None
+
+
+# --------------------------------------------------------------------------- studies of real runs
+def _mtimes(out: Path) -> dict[str, int]:
+    return {
+        str(p.relative_to(out)): p.stat().st_mtime_ns
+        for p in out.glob("*/*")
+        if p.name in ("summary.json", "records.jsonl", "started", "recording.rrd") and p.parent.name != "report"
+    }
+
+
+def _interval(run_dir: Path) -> tuple[float, float]:
+    """When a run started (its ``started`` file) and ended (its summary written), in s since the epoch."""
+    started = datetime.fromisoformat((run_dir / "started").read_text().strip()).timestamp()
+    return started, (run_dir / "summary.json").stat().st_mtime
+
+
+def test_study_with_jobs_runs_at_once_reports_the_groups_and_never_runs_a_completed_run_twice(tmp_path):
+    out = tmp_path / "study"
+    command = (
+        "study",
+        str(LEARN),
+        "--vary",
+        "modules.vigilance.params.value=0,-0.3",
+        "--seeds",
+        "0,1",
+        "--set",
+        "protocol.trials=30",
+        "--out",
+        str(out),
+        "--jobs",
+        "2",
+    )
+    done = sfl(*command, "--quiet", "--k", "3", timeout=180)
+    assert done.returncode == 0, done.stderr
+    names = ["value0_seed0", "value0_seed1", "value-0.3_seed0", "value-0.3_seed1"]
+    for name in names:
+        assert json.loads((out / name / "summary.json").read_text())["status"] == "completed"
+        assert (out / name / "records.jsonl").read_bytes().count(b'"kind":"trial"') == 30
+    assert "sfl: [4/4] value-0.3_seed1 completed: 30 trials" in done.stderr
+    # two runs at a time: some runs overlap in time, never more than two
+    spans = [_interval(out / n) for n in names]
+    running = [sum(start <= t < end for start, end in spans) for t in sorted(s for s, _ in spans)]
+    assert max(running) == 2, spans
+    if len(os.sched_getaffinity(0)) >= 2:
+        assert "2 runs at once, on core" in done.stdout  # each run on its own cores
+    # the report compares the two groups over their two seeds
+    page = (out / "report" / "README.md").read_text()
+    assert "| group | seeds | failures before first success | failures before K=3 |" in page
+    assert "| value=0 | 2 |" in page and "| value=-0.3 | 2 |" in page
+    for figure in ("study_learning.png", "study_best_eta.png", "study_failures_before_k.png"):
+        assert (out / "report" / figure).stat().st_size > 20_000
+    numbers = json.loads((out / "report" / "study_summary.json").read_text())
+    assert numbers["groups"]["value=0"]["runs"] == ["value0_seed0", "value0_seed1"]
+    assert "| value0_seed0 | completed | learn |" in page  # the run table and the vigilance study are still there
+    assert (out / "report" / "success_vs_vigilance_x-y.png").exists()
+
+    # the same command again: nothing runs; a run whose summary is gone (killed) runs again from scratch
+    before = _mtimes(out)
+    again = sfl(*command, timeout=180)  # with the progress view (not --quiet)
+    assert again.returncode == 0, again.stderr
+    assert "0 to run" in again.stdout and "4 kept from before" in again.stdout
+    assert _mtimes(out) == before
+    (out / "value0_seed1" / "summary.json").unlink()  # as a run killed with its study (kill -9) leaves it
+    third = sfl(*command, "--quiet", "--k", "2", "--window", "10", timeout=180)  # the report's own K and window
+    assert third.returncode == 0, third.stderr
+    assert f"value0_seed1 was unfinished: its folder moved to {out / 'attempts' / 'value0_seed1.1'}" in third.stdout
+    after = _mtimes(out)
+    assert {k: v for k, v in after.items() if not k.startswith("value0_seed1/")} == {
+        k: v for k, v in before.items() if not k.startswith("value0_seed1/")
+    }
+    assert after["value0_seed1/summary.json"] and (out / "attempts" / "value0_seed1.1" / "records.jsonl").exists()
+    page = (out / "report" / "README.md").read_text()
+    assert "failures before K=2" in page and "success rate, last 10 trials" in page
+
+
+def test_a_killed_run_is_named_and_left_out_of_every_mean_and_the_others_finish(tmp_path):
+    out = tmp_path / "study"
+    study = subprocess.Popen(
+        [sys.executable, "-m", "sfl_brain.cli", "study", str(LEARN), "--vary", "protocol.trials=30,100000"]
+        + ["--out", str(out), "--jobs", "2", "--quiet", "--k", "2"],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        long_run = out / "trials100000"
+        wait_for_trials(long_run, 3, study, timeout=90)
+        (child,) = [
+            p for p in psutil.Process(study.pid).children() if "run" in p.cmdline() and str(long_run) in p.cmdline()
+        ]
+        child.kill()
+        stdout, stderr = study.communicate(timeout=120)
+    finally:
+        study.kill()
+    assert study.returncode == 1, stderr
+    assert "sfl: 1 of 2 runs failed, marked in the report and left out of its means: trials100000" in stderr
+    assert "trials100000 failed" in stderr and "`sfl run` was killed by signal 9" in stderr
+    assert json.loads((out / "trials30" / "summary.json").read_text())["status"] == "completed"
+    page = (out / "report" / "README.md").read_text()
+    assert "| trials=30 | 1 |" in page and "| trials=100000 |" not in page
+    assert "Left out of every curve, box and mean: 1 runs that did not complete:" in page
+    assert (
+        "- trials100000: unfinished, no summary.json: the run was killed, or is still running (the study: failed: "
+        "`sfl run` was killed by signal 9" in page
+    )
+    outcome = json.loads((out / "study.json").read_text())["outcomes"]["trials100000"]
+    assert outcome["status"] == "failed" and outcome["exit_code"] == -9
+    # sfl report on the study folder: into its report/ folder by default, with what the study said of its runs
+    (out / "report" / "README.md").unlink()
+    report = sfl("report", str(out), "--k", "3")
+    assert report.returncode == 0, report.stderr
+    assert f"sfl: {out / 'trials100000'} is unfinished" in report.stderr
+    page = (out / "report" / "README.md").read_text()
+    assert "failures before K=3" in page and "(the study: failed: `sfl run` was killed by signal 9" in page
+
+
+def test_bad_study_options_exit_2_in_one_line_before_anything_runs(tmp_path):
+    out = tmp_path / "study"
+    done = sfl("study", str(LEARN), "--vary", "modules.vigilance.params.value=0", "--out", str(out), "--jobs", "0")
+    assert done.returncode == 2 and done.stderr == "sfl: --jobs 0: expected 1 or more runs at once\n"
+    done = sfl("study", str(LEARN), "--vary", "a.b=1,1", "--out", str(out))
+    assert done.returncode == 2 and done.stderr == "sfl: --vary a.b: 1 given twice\n"
+    done = sfl("study", str(LEARN), "--out", str(out), "--jobs", "2", "--cluster", "tcp://127.0.0.1:9")
+    assert done.returncode == 2 and done.stderr.startswith("sfl: --jobs and --cluster: choose one")
+    assert not out.exists()
