@@ -676,6 +676,59 @@ class DaskRunner:
             self.client.close(timeout=5)
 
 
+@contextlib.contextmanager
+def loopback_cluster(folder: Path, workers: int = 2, cores: list[list[int]] | None = None) -> Iterator[Path]:
+    """A Dask cluster on 127.0.0.1, started as on machines: ``dask scheduler`` and ``workers`` ``dask worker``
+    processes of one thread each (worker i on ``cores[i]`` if given), every server and dashboard on loopback, each
+    in a process group of its own, stopped (SIGTERM, then SIGKILL) on leaving. Yields the scheduler file. For tests
+    and benchmarks; their output goes to ``folder/dask.log``."""
+    import distributed
+
+    scheduler_file = Path(folder) / "scheduler.json"
+    loopback = ["--host", "127.0.0.1", "--dashboard-address", "127.0.0.1:0"]
+    procs: list[subprocess.Popen] = []
+    log = open(Path(folder) / "dask.log", "ab")  # noqa: SIM115 - closed below
+
+    def dask(*args: str, cpus: list[int] | None = None) -> subprocess.Popen:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "dask", *args, *loopback],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
+        if cpus is not None:  # before it starts its worker process, which inherits them
+            os.sched_setaffinity(proc.pid, cpus)
+        procs.append(proc)
+        return proc
+
+    try:
+        scheduler = dask("scheduler", "--port", "0", "--scheduler-file", str(scheduler_file))
+        deadline = time.monotonic() + 60
+        while not scheduler_file.exists():
+            if scheduler.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"the Dask scheduler did not start (see {Path(folder) / 'dask.log'})")
+            time.sleep(0.05)
+        for i in range(workers):
+            cpus = cores[i % len(cores)] if cores else None
+            dask("worker", "--scheduler-file", str(scheduler_file), "--nthreads", "1", "--nworkers", "1", cpus=cpus)
+        with distributed.Client(scheduler_file=str(scheduler_file), timeout=30) as client:
+            client.wait_for_workers(workers, timeout=60)
+        yield scheduler_file
+    finally:
+        for proc in reversed(procs):
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(proc.pid, signal.SIGTERM)
+        deadline = time.monotonic() + 10
+        for proc in procs:
+            try:
+                proc.wait(timeout=max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+        log.close()
+
+
 # --------------------------------------------------------------------------- the study's loop
 class StudyInterrupted(Exception):
     """Ctrl-C or SIGTERM stopped the study; ``outcomes`` holds every run that ended, the stopped ones too."""
@@ -819,7 +872,11 @@ class StudyView:
         }
 
     def trials_done(self) -> int:
-        return sum(o.trials for o in self.outcomes.values()) + sum(r.trials for r in self.running.values())
+        """Trials done or no longer to do: a run that ended (even early) counts its whole plan."""
+        ended = sum(
+            self.runs[n].planned if self.runs[n].planned is not None else o.trials for n, o in self.outcomes.items()
+        )
+        return ended + sum(r.trials for r in self.running.values())
 
     def eta(self) -> float | None:
         """s until every run is done, at this invocation's rate of trials so far (None: not known yet)."""
