@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 from datetime import datetime
@@ -241,3 +242,30 @@ def test_bad_study_options_exit_2_in_one_line_before_anything_runs(tmp_path):
     done = sfl("study", str(LEARN), "--out", str(out), "--jobs", "2", "--cluster", "tcp://127.0.0.1:9")
     assert done.returncode == 2 and done.stderr.startswith("sfl: --jobs and --cluster: choose one")
     assert not out.exists()
+
+
+def test_ctrl_c_stops_every_run_of_the_study_and_says_how_to_resume(tmp_path):
+    out = tmp_path / "study"
+    study = subprocess.Popen(
+        [sys.executable, "-m", "sfl_brain.cli", "study", str(LEARN), "--seeds", "0,1"]
+        + ["--set", "protocol.trials=100000", "--out", str(out), "--jobs", "2", "--quiet"],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        for name in ("run_seed0", "run_seed1"):
+            wait_for_trials(out / name, 2, study, timeout=90)
+        family = psutil.Process(study.pid).children(recursive=True)
+        assert len(family) >= 2 * 5  # two sfl run, each with acc, vigilance, ofc and a body
+        study.send_signal(signal.SIGINT)
+        _, stderr = study.communicate(timeout=90)
+    finally:
+        study.kill()
+    assert study.returncode == 130, stderr
+    assert "sfl: study interrupted; 0 of 2 runs are done and kept. The same command resumes it" in stderr
+    for name in ("run_seed0", "run_seed1"):
+        assert json.loads((out / name / "summary.json").read_text())["status"] == "interrupted"
+    _, alive = psutil.wait_procs(family, timeout=10)
+    assert not alive, [p.cmdline() for p in alive]
