@@ -414,7 +414,11 @@ def study_runs(folder: Path) -> tuple[list[Path], dict[str, str]]:
     folder = Path(folder)
     manifest = read_manifest(folder)
     planned = [r["name"] for r in manifest.get("runs", [])]
-    found = {c.name: c for c in folder.iterdir() if c.is_dir() and (c / "scenario.yaml").exists()}
+    found = {
+        c.name: c
+        for c in folder.iterdir()
+        if c.is_dir() and not c.name.startswith(".") and (c / "scenario.yaml").exists()  # not a half-unpacked one
+    }
     order = [n for n in planned if n in found] + sorted(n for n in found if n not in planned)
     outcomes = manifest.get("outcomes", {})
     said = {
