@@ -145,7 +145,7 @@ def run_command(
 def _study_options(command):
     """--k, --distinct and --window: what the study report measures (``sfl study`` and ``sfl report``)."""
     from .metrics import DISTINCT, K_GOOD
-    from .report_study import WINDOW
+    from .study import WINDOW
 
     command = click.option(
         "--window", type=int, default=WINDOW, show_default=True, help="trials in the success rate's moving window"
@@ -162,15 +162,20 @@ def _study_options(command):
     )(command)
 
 
-def _study_settings(k: int, distinct: float, window: int, said: dict | None = None):
-    """The study report's settings, or exit 2 in one line on a value out of range."""
-    from .report_study import StudySettings
-
+def _check_study_options(k: int, distinct: float, window: int) -> None:
+    """Exit 2 in one line on a study report setting out of range."""
     checks = (("--k", k, k >= 1), ("--distinct", distinct, distinct > 0), ("--window", window, window >= 1))
     for name, value, ok in checks:
         if not ok:
             click.echo(f"sfl: {name} {value}: expected more than 0", err=True)
             sys.exit(EXIT_BAD_INPUT)
+
+
+def _study_settings(k: int, distinct: float, window: int, said: dict | None = None):
+    """The study report's settings (checked)."""
+    from .report_study import StudySettings
+
+    _check_study_options(k, distinct, window)
     return StudySettings(k=k, distinct=distinct, window=window, said=said or {})
 
 
@@ -203,17 +208,16 @@ def study(scenario, vary, seeds, overrides, out, jobs, cluster, k, distinct, win
     from .report import write_report
     from .study import (
         FINAL,
-        DaskRunner,
         LocalRunner,
         StudyInterrupted,
-        StudyView,
-        connect,
         kept_outcomes,
         plan_study,
         run_study,
         triage,
         write_manifest,
     )
+    from .study_dask import DaskRunner, connect
+    from .study_view import StudyView
 
     if jobs < 1:
         click.echo(f"sfl: --jobs {jobs}: expected 1 or more runs at once", err=True)
@@ -222,7 +226,7 @@ def study(scenario, vary, seeds, overrides, out, jobs, cluster, k, distinct, win
     if cluster is not None and ctx.get_parameter_source("jobs") != click.core.ParameterSource.DEFAULT:
         click.echo("sfl: --jobs and --cluster: choose one (a cluster runs as many at once as it has threads)", err=True)
         sys.exit(EXIT_BAD_INPUT)
-    _study_settings(k, distinct, window)  # checked before anything runs
+    _check_study_options(k, distinct, window)  # before anything runs
     try:
         planned = plan_study(scenario, vary, seeds, overrides)
     except BadInput as exc:

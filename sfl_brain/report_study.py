@@ -31,9 +31,8 @@ from scipy import stats  # noqa: E402
 
 from .metrics import DISTINCT, K_GOOD, safe_learning, trial_rows  # noqa: E402
 from .records import read_records, run_status  # noqa: E402
+from .study import WINDOW  # noqa: E402
 
-#: trials in the moving window of the success rate
-WINDOW = 20
 #: figure width (in) and font size (pt): readable on a printed page
 WIDTH_IN = 6.5
 FONT_PT = 9

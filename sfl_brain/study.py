@@ -6,9 +6,9 @@ The cycle is visible in :func:`run_study`: start runs while there is room, read 
 - :class:`LocalRunner` (``--jobs N``): each run a child ``sfl run ... --quiet`` process on this machine,
   ``N`` at once, each on its own share of the usable cores (so that two runs never pin their lockstep pairs
   to the same core); its trials so far read from the growth of its ``records.jsonl``.
-- :class:`DaskRunner` (``--cluster ADDRESS``): each run a task on a running Dask cluster; the task runs
-  ``sfl run`` on its worker in a temporary folder, says its trials so far as Dask events, and returns the
-  run folder's files (a tar archive), which land in the study folder. Nothing needs a shared file system.
+- :class:`~sfl_brain.study_dask.DaskRunner` (``--cluster ADDRESS``): each run a task on a running Dask cluster;
+  the task runs ``sfl run`` on its worker in a temporary folder, says its trials so far as Dask events, and
+  returns the run folder's files (a tar archive), which land in the study folder. No shared file system needed.
 
 A study folder holds a folder per run (``<varied values>_seed<S>``), ``study.json`` (the command and each
 run's last outcome) and, after the report, ``report/``. Run again with the same command, a study skips every
@@ -22,24 +22,18 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import io
 import itertools
 import json
 import math
 import os
-import queue
-import shutil
 import signal
-import socket
 import subprocess
 import sys
-import tarfile
 import tempfile
 import time
-import uuid
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import yaml
@@ -58,8 +52,8 @@ RUN_LOG = "sfl-run.log"
 FINAL = (RunStatus.COMPLETED, RunStatus.STALLED)
 #: s a run is given to stop after an interrupt before it is asked again (its records, summary and recording)
 STOP_GRACE = 30.0
-#: s a Dask scheduler is given to answer ``--cluster``
-CONNECT_TIMEOUT = 5.0
+#: trials in the moving window of the study report's success rate (``--window``)
+WINDOW = 20
 
 
 # --------------------------------------------------------------------------- what the study runs
@@ -483,252 +477,6 @@ class LocalRunner:
         pass
 
 
-# --------------------------------------------------------------------------- Dask
-def tar_folder(folder: Path) -> bytes:
-    """The files under ``folder`` as an uncompressed tar archive (its parquet, npz and rrd are compressed)."""
-    buffer = io.BytesIO()
-    with tarfile.open(fileobj=buffer, mode="w") as tar:
-        for path in sorted(folder.rglob("*")):
-            tar.add(path, arcname=str(path.relative_to(folder)), recursive=False)
-    return buffer.getvalue()
-
-
-def untar(data: bytes, folder: Path) -> None:
-    """Unpack :func:`tar_folder`'s archive into ``folder`` (only plain files and folders inside it)."""
-    folder.mkdir(parents=True, exist_ok=True)
-    with tarfile.open(fileobj=io.BytesIO(data), mode="r") as tar:
-        tar.extractall(folder, filter="data")
-
-
-def scenario_bundle(plan: Plan) -> bytes:
-    """A run's self-contained scenario (``scenario.yaml`` and its ``inputs/``) as a tar archive for a worker."""
-    from .run import self_contained
-
-    with tempfile.TemporaryDirectory(prefix="sfl-study-") as tmp:
-        folder = Path(tmp)
-        resolved = self_contained(plan, folder)
-        (folder / "scenario.yaml").write_text(yaml.safe_dump(resolved, sort_keys=False))
-        return tar_folder(folder)
-
-
-def run_on_worker(name: str, bundle: bytes, topic: str, stop_event: str) -> dict:
-    """A Dask task: run one study run with ``sfl run`` on this worker, in a temporary folder, and return its
-    files. Says ``started`` and its trials so far as events on ``topic``; stops the run (as Ctrl-C does) when
-    the study sets the Dask event ``stop_event``."""
-    from distributed import Event, get_worker
-
-    worker = get_worker()
-    stop = Event(stop_event)
-    where = f"{socket.gethostname()} {worker.address}"
-    if stop.is_set():
-        return {"exit_code": None, "files": None, "where": where, "trials": 0, "wall_s": 0.0}
-    with tempfile.TemporaryDirectory(prefix="sfl-study-") as tmp:
-        untar(bundle, Path(tmp) / "in")
-        run_dir = Path(tmp) / "run"
-        proc = start_sfl_run(sfl_run_command(Path(tmp) / "in" / "scenario.yaml", run_dir), run_dir)
-        started = time.monotonic()
-        worker.log_event(topic, {"run": name, "started": where})
-        counter = TrialCounter(run_dir / "records.jsonl")
-        while proc.poll() is None:
-            with contextlib.suppress(subprocess.TimeoutExpired):
-                proc.wait(timeout=1.0)
-            if counter.poll():
-                worker.log_event(topic, {"run": name, "trials": counter.trials, "successes": counter.successes})
-            if proc.poll() is None and stop.is_set():
-                interrupt([proc])
-        counter.poll()
-        return {
-            "exit_code": proc.returncode,
-            "files": tar_folder(run_dir),
-            "where": where,
-            "trials": counter.trials,
-            "wall_s": time.monotonic() - started,
-        }
-
-
-def connect(address: str, timeout: float = CONNECT_TIMEOUT):
-    """A Dask client of the scheduler at ``address`` (or named by a scheduler file); :class:`BadInput` in one line
-    when Dask is not installed or no scheduler answers within ``timeout`` s."""
-    try:
-        import distributed
-    except ImportError:
-        raise BadInput("--cluster needs Dask: pip install 'sfl-brain[cluster]'") from None
-    scheduler_file = Path(address).is_file()
-    what = f"--cluster {address}"
-    try:
-        if scheduler_file:
-            return distributed.Client(scheduler_file=address, timeout=timeout, set_as_default=False)
-        return distributed.Client(address, timeout=timeout, set_as_default=False)
-    except (OSError, TimeoutError) as exc:
-        said = str(exc).splitlines()[0][:160] if str(exc) else type(exc).__name__
-        raise BadInput(f"{what}: no Dask scheduler answered within {timeout:g} s ({said})") from None
-    except (ValueError, TypeError) as exc:
-        raise BadInput(f"{what}: not a Dask scheduler address or scheduler file ({exc})") from None
-
-
-class DaskRunner:
-    """Runs of a study as tasks on a Dask cluster (every run submitted at once; the scheduler queues them)."""
-
-    def __init__(self, client, out: Path, plans: dict[str, Plan]) -> None:
-        self.client, self.out, self.plans = client, out, plans
-        token = uuid.uuid4().hex[:8]
-        self.topic = f"sfl-study-{token}"
-        self.stop_name = f"sfl-study-stop-{token}"
-        self.inbox: queue.Queue = queue.Queue()  # filled on the client's thread, read by the study's loop
-        self.futures: dict[str, object] = {}
-        self.started: dict[str, tuple[float, str]] = {}
-        self.trials: dict[str, int] = {}
-        self.cancelled: set[str] = set()
-        client.subscribe_topic(self.topic, lambda event: self.inbox.put(("event", event[1])))
-
-    def describe(self) -> str:
-        workers = self.client.scheduler_info().get("workers", {})
-        threads = sum(w.get("nthreads", 0) for w in workers.values())
-        text = f"Dask scheduler {self.client.scheduler.address}: {len(workers)} workers, {threads} threads"
-        return text + ("" if workers else " (no worker yet: runs wait for one)")
-
-    def has_room(self) -> bool:
-        return True
-
-    def busy(self) -> bool:
-        return bool(self.futures)
-
-    def start(self, run: StudyRun) -> Iterator[StudyEvent]:
-        bundle = scenario_bundle(self.plans[run.name])
-        future = self.client.submit(
-            run_on_worker,
-            run.name,
-            bundle,
-            self.topic,
-            self.stop_name,
-            key=f"sfl-run-{run.name}-{uuid.uuid4().hex[:8]}",
-            pure=False,
-        )
-        future.add_done_callback(lambda f, name=run.name: self.inbox.put(("done", name)))
-        self.futures[run.name] = future
-        return iter(())
-
-    def poll(self, timeout: float) -> Iterator[StudyEvent]:
-        deadline = time.monotonic() + timeout
-        while True:
-            try:
-                kind, item = self.inbox.get(timeout=max(0.0, deadline - time.monotonic()))
-            except queue.Empty:
-                return
-            if kind == "event" and item.get("run") in self.futures:
-                name = item["run"]
-                if "started" in item:
-                    self.started[name] = (time.monotonic(), item["started"])
-                    yield RunStarted(name, item["started"])
-                else:
-                    self.trials[name] = item["trials"]
-                    yield RunProgress(name, item["trials"], item["successes"])
-            elif kind == "done" and item in self.futures:
-                yield RunFinished(item, self._collect(item))
-
-    def _collect(self, name: str) -> Outcome:
-        future = self.futures.pop(name)
-        began, where = self.started.get(name, (time.monotonic(), "a Dask worker"))
-        if name in self.cancelled:
-            future.release()
-            return Outcome(str(RunStatus.INTERRUPTED), "stopped before it started", None, 0, None, where)
-        try:
-            result = future.result()
-        except BaseException as exc:  # noqa: BLE001 - the task failed or its workers died
-            if isinstance(exc, KeyboardInterrupt):
-                raise
-            reason = f"the Dask task failed on {where}: {type(exc).__name__}: {exc}"
-            return Outcome(str(RunStatus.FAILED), reason, None, self.trials.get(name, 0), None, where)
-        finally:
-            future.release()
-        if result["files"] is None:
-            return Outcome(str(RunStatus.INTERRUPTED), "stopped before it started", None, 0, None, result["where"])
-        incoming = self.out / f".incoming-{name}"
-        shutil.rmtree(incoming, ignore_errors=True)
-        untar(result["files"], incoming)
-        incoming.rename(self.out / name)
-        return finished(self.out / name, result["exit_code"], result["trials"], result["wall_s"], result["where"])
-
-    def stop(self) -> Iterator[StudyEvent]:
-        """Ask every task to stop its run (a Dask event the tasks watch); cancel the ones not started."""
-        from distributed import Event
-
-        Event(self.stop_name, client=self.client).set()
-        self.cancelled = {n for n in self.futures if n not in self.started}
-        self.client.cancel([self.futures[n] for n in self.cancelled])
-        deadline = time.monotonic() + STOP_GRACE + 10.0
-        while self.futures and time.monotonic() < deadline:
-            try:
-                yield from self.poll(min(1.0, deadline - time.monotonic()))
-            except KeyboardInterrupt:  # asked again: do not wait for them
-                break
-        for name, future in list(self.futures.items()):
-            self.client.cancel([future])
-            del self.futures[name]
-            where = self.started.get(name, (0, "a Dask worker"))[1]
-            stopped = Outcome("interrupted", "stopped by the study", None, self.trials.get(name, 0), None, where)
-            yield RunFinished(name, stopped)
-
-    def close(self) -> None:
-        with contextlib.suppress(Exception):
-            self.client.unsubscribe_topic(self.topic)
-        with contextlib.suppress(Exception):
-            self.client.close(timeout=5)
-
-
-@contextlib.contextmanager
-def loopback_cluster(folder: Path, workers: int = 2, cores: list[list[int]] | None = None) -> Iterator[Path]:
-    """A Dask cluster on 127.0.0.1, started as on machines: ``dask scheduler`` and ``workers`` ``dask worker``
-    processes of one thread each (worker i on ``cores[i]`` if given), every server and dashboard on loopback, each
-    in a process group of its own, stopped (SIGTERM, then SIGKILL) on leaving. Yields the scheduler file. For tests
-    and benchmarks; their output goes to ``folder/dask.log``."""
-    import distributed
-
-    scheduler_file = Path(folder) / "scheduler.json"
-    loopback = ["--host", "127.0.0.1", "--dashboard-address", "127.0.0.1:0"]
-    procs: list[subprocess.Popen] = []
-    log = open(Path(folder) / "dask.log", "ab")  # noqa: SIM115 - closed below
-
-    def dask(*args: str, cpus: list[int] | None = None) -> subprocess.Popen:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "dask", *args, *loopback],
-            stdout=log,
-            stderr=subprocess.STDOUT,
-            start_new_session=True,
-        )
-        if cpus is not None:  # before it starts its worker process, which inherits them
-            os.sched_setaffinity(proc.pid, cpus)
-        procs.append(proc)
-        return proc
-
-    try:
-        scheduler = dask("scheduler", "--port", "0", "--scheduler-file", str(scheduler_file))
-        deadline = time.monotonic() + 60
-        while not scheduler_file.exists():
-            if scheduler.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError(f"the Dask scheduler did not start (see {Path(folder) / 'dask.log'})")
-            time.sleep(0.05)
-        for i in range(workers):
-            cpus = cores[i % len(cores)] if cores else None
-            dask("worker", "--scheduler-file", str(scheduler_file), "--nthreads", "1", "--nworkers", "1", cpus=cpus)
-        with distributed.Client(scheduler_file=str(scheduler_file), timeout=30) as client:
-            client.wait_for_workers(workers, timeout=60)
-        yield scheduler_file
-    finally:
-        for proc in reversed(procs):
-            with contextlib.suppress(ProcessLookupError):
-                os.killpg(proc.pid, signal.SIGTERM)
-        deadline = time.monotonic() + 10
-        for proc in procs:
-            try:
-                proc.wait(timeout=max(0.1, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                with contextlib.suppress(ProcessLookupError):
-                    os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait()
-        log.close()
-
-
 # --------------------------------------------------------------------------- the study's loop
 class StudyInterrupted(Exception):
     """Ctrl-C or SIGTERM stopped the study; ``outcomes`` holds every run that ended, the stopped ones too."""
@@ -783,175 +531,3 @@ def run_study(todo: list[StudyRun], runner, show: Callable[[StudyEvent], None]) 
                 pass
             raise StudyInterrupted(outcomes) from None
     return outcomes
-
-
-# --------------------------------------------------------------------------- what the terminal shows
-def _duration(seconds: float) -> str:
-    seconds = max(0, int(round(seconds)))
-    if seconds < 120:
-        return f"{seconds} s"
-    if seconds < 7200:
-        return f"{seconds // 60} min {seconds % 60:02d} s"
-    return f"{seconds // 3600} h {seconds % 3600 // 60:02d} min"
-
-
-@dataclass
-class _Running:
-    planned: int | None
-    where: str
-    since: float
-    trials: int = 0
-    successes: int = 0
-    last_trial: float = field(default_factory=time.monotonic)
-    task: object = None
-
-
-class StudyView:
-    """The whole study on the terminal: runs done / running / queued / failed / stalled, each running run's trials
-    so far and the study's ETA (a rich view; ``quiet``: plain lines, and a status line every ``every`` s).
-
-    Every update comes from the study's own loop (no refresh thread): :meth:`tick` redraws."""
-
-    QUIET_AFTER = 60.0  # s without a new trial before a running run is said to be quiet
-
-    def __init__(self, runs: list[StudyRun], kept: dict[str, Outcome], quiet: bool, every: float = 60.0) -> None:
-        from rich.console import Console
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
-
-        self.runs = {r.name: r for r in runs}
-        self.order = {r.name: i for i, r in enumerate(runs, 1)}
-        self.kept = kept
-        self.outcomes: dict[str, Outcome] = dict(kept)
-        self.running: dict[str, _Running] = {}
-        self.quiet, self.every = quiet, every
-        self.console = Console(stderr=True, soft_wrap=True, highlight=False)
-        self.started = time.monotonic()
-        self.last_line = self.started
-        self.trials_here = 0  # trials run by this invocation (the ETA's rate)
-        self.bar = Progress(
-            TextColumn("{task.description}"),
-            BarColumn(bar_width=24),
-            MofNCompleteColumn(),
-            TextColumn("{task.fields[status]}"),
-            console=self.console,
-            auto_refresh=False,
-            disable=quiet,
-        )
-        self.study_task = None
-
-    def __enter__(self):
-        self.bar.start()
-        self.study_task = self.bar.add_task("study", total=self._planned_total(), status="")
-        self.tick()
-        return self
-
-    def __exit__(self, *exc):
-        self.tick()
-        self.bar.stop()
-        return False
-
-    def say(self, text: str, style: str = "") -> None:
-        """One whole line above the bars (or on its own when quiet)."""
-        if self.quiet:
-            print(text, file=sys.stderr, flush=True)
-        else:
-            self.bar.console.print(text, style=style or None, markup=False)
-
-    def _planned_total(self) -> int | None:
-        planned = [r.planned for r in self.runs.values()]
-        return None if any(p is None for p in planned) else sum(planned)
-
-    def _counts(self) -> dict[str, int]:
-        statuses = [o.status for o in self.outcomes.values()]
-        return {
-            "done": len(self.outcomes),
-            "running": len(self.running),
-            "failed": statuses.count(RunStatus.FAILED),
-            "stalled": statuses.count(RunStatus.STALLED),
-            "interrupted": statuses.count(RunStatus.INTERRUPTED),
-        }
-
-    def trials_done(self) -> int:
-        """Trials done or no longer to do: a run that ended (even early) counts its whole plan."""
-        ended = sum(
-            self.runs[n].planned if self.runs[n].planned is not None else o.trials for n, o in self.outcomes.items()
-        )
-        return ended + sum(r.trials for r in self.running.values())
-
-    def eta(self) -> float | None:
-        """s until every run is done, at this invocation's rate of trials so far (None: not known yet)."""
-        total = self._planned_total()
-        elapsed = time.monotonic() - self.started
-        if total is None or self.trials_here == 0 or elapsed <= 0:
-            return None
-        return max(0.0, total - self.trials_done()) / (self.trials_here / elapsed)
-
-    def status_text(self) -> str:
-        c = self._counts()
-        queued = len(self.runs) - c["done"] - c["running"]
-        text = f"{c['done']}/{len(self.runs)} done"
-        if self.kept:
-            text += f" ({len(self.kept)} kept)"
-        text += f", {c['running']} running, {queued} queued, {c['failed']} failed, {c['stalled']} stalled"
-        if c["interrupted"]:
-            text += f", {c['interrupted']} interrupted"
-        eta = self.eta()
-        return text + (f", ETA {_duration(eta)}" if eta is not None else "")
-
-    def show(self, event: StudyEvent) -> None:
-        now = time.monotonic()
-        if isinstance(event, RunStarted):
-            run = self.runs[event.name]
-            state = self.running[event.name] = _Running(run.planned, event.where, now)
-            if self.quiet:
-                self.say(f"sfl: [{self.order[event.name]}/{len(self.runs)}] {event.name} started on {event.where}")
-            else:
-                state.task = self.bar.add_task(f"  {event.name}", total=run.planned, status=event.where)
-        elif isinstance(event, RunProgress):
-            state = self.running.get(event.name)
-            if state is None:  # a Dask task whose start event came late
-                state = self.running[event.name] = _Running(self.runs[event.name].planned, "a Dask worker", now)
-                if not self.quiet:
-                    state.task = self.bar.add_task(f"  {event.name}", total=state.planned, status="")
-            self.trials_here += max(0, event.trials - state.trials)
-            state.trials, state.successes, state.last_trial = event.trials, event.successes, now
-        elif isinstance(event, RunFinished):
-            state = self.running.pop(event.name, None)
-            if state is not None:
-                self.trials_here += max(0, event.outcome.trials - state.trials)
-                if state.task is not None:
-                    self.bar.remove_task(state.task)
-            else:
-                self.trials_here += event.outcome.trials
-            self.outcomes[event.name] = event.outcome
-            self.say(self.finished_line(event.name, event.outcome), style=_STYLE.get(event.outcome.status, "red"))
-        self.tick()
-
-    def finished_line(self, name: str, o: Outcome) -> str:
-        wall = f", {_duration(o.wall_s)}" if o.wall_s is not None else ""
-        line = f"sfl: [{self.order[name]}/{len(self.runs)}] {name} {o.status}: {o.trials} trials{wall}, on {o.where}"
-        return line + (f" ({o.reason})" if o.status != RunStatus.COMPLETED and o.reason else "")
-
-    def tick(self) -> None:
-        now = time.monotonic()
-        if self.quiet:
-            if self.running and now - self.last_line >= self.every:
-                self.last_line = now
-                each = ", ".join(
-                    f"{n} {r.trials}/{r.planned if r.planned is not None else '?'}" for n, r in self.running.items()
-                )
-                self.say(f"sfl: study: {self.status_text()}; running: {each}")
-            return
-        if self.study_task is None:
-            return
-        self.bar.update(self.study_task, completed=self.trials_done(), status=self.status_text())
-        for state in self.running.values():
-            rate = f"success {state.successes / state.trials:.0%}" if state.trials else "starting"
-            status = f"{rate}, {_duration(now - state.since)}, on {state.where}"
-            if now - state.last_trial > self.QUIET_AFTER:
-                status += f", no new trial for {_duration(now - state.last_trial)}"
-            self.bar.update(state.task, completed=state.trials, status=status)
-        self.bar.refresh()
-
-
-_STYLE = {"completed": "green", "stalled": "yellow", "interrupted": "yellow"}
