@@ -54,9 +54,11 @@ def test_both_doors_pass_check_env_on_the_planar_reflex_walker(env_id):
         assert said == []
 
 
-def test_the_trial_door_passes_check_env_on_the_humanoid():
-    """Four humanoid trials (about 2.5 s on 2 cores)."""
+def test_both_doors_pass_check_env_on_the_humanoid():
+    """The trial door runs four humanoid trials (about 2.5 s on 2 cores); the tick door a few ticks."""
     assert checked(sfl_gym.TRIAL_ID, HUMANOID) == []
+    said = checked(sfl_gym.TICK_ID, HUMANOID)  # joint position targets in rad: the advice to rescale, nothing else
+    assert len(said) == 1 and NORMALISE in said[0]
 
 
 def test_the_spaces_are_the_scenarios_and_the_bodys_signals():
