@@ -156,9 +156,13 @@ class Gate:
         self.threshold: m.Threshold = c.call(m.VigilanceStart())
         self.decision = 0  # decisions recorded
         self.consecutive_nogo = 0
+        self.seconds = 0.0  # wall seconds waiting for the ACC's evaluations
 
     def evaluate(self, candidates: np.ndarray) -> m.Evaluation:
-        return self.c.call(m.Evaluate(candidates=candidates, s_vig=self.threshold.s_vig))
+        started = time.perf_counter()
+        evaluation = self.c.call(m.Evaluate(candidates=candidates, s_vig=self.threshold.s_vig))
+        self.seconds += time.perf_counter() - started
+        return evaluation
 
     def record(self, candidates: np.ndarray, evaluation: m.Evaluation, go_at: int | None, count: int) -> None:
         rows = []
@@ -221,8 +225,11 @@ def run_learn(c: Conductor) -> dict:
     trial_decisions: deque[int] = deque(maxlen=20)  # decisions each recent trial took (progress estimate)
     decisions_at_last_trial = 0
     tried: list[dict] = []  # the trial rows, for the run's safe-learning metrics
+    asking = telling = 0.0  # seconds in the proposer (benchmarks/proposers.py)
     while progress.trials < proto.trials:
+        started = time.perf_counter()
         v = proposer.ask(gate)
+        asking += time.perf_counter() - started
         if v is None:
             stalled, stop_reason = True, proposer.stop_reason
             break
@@ -239,8 +246,10 @@ def run_learn(c: Conductor) -> dict:
             m.Learn(v=v, success=result.success, rho=rho if rho is not None else 1.0, eta=eta),
             m.TrialDone(trial_index=trial_id + 1, success=result.success, n_success=n_success, n_failure=n_failure),
         )
+        started = time.perf_counter()
         proposer.tell(v, Outcome(result.success, eta))
         proposer.checkpoint(c.run_dir / PROPOSER_CHECKPOINT)
+        telling += time.perf_counter() - started
         progress.s_vig = gate.threshold.s_vig
         trial_decisions.append(gate.decision - decisions_at_last_trial)
         decisions_at_last_trial = gate.decision
@@ -267,6 +276,10 @@ def run_learn(c: Conductor) -> dict:
         "stalled": stalled,
         "stop_reason": stop_reason,
         "proposer": proto.proposer.kind,
+        # wall seconds in the proposer's ask (``gate``: of which waiting for the ACC's evaluations, success-failure
+        # learning's decisions and every other proposer's record of what the gate would have said) and in its tell
+        # with the checkpoint
+        "proposer_seconds": {"ask": asking, "gate": gate.seconds, "tell": telling},
         "safe_learning": {k: v for k, v in safe_learning(tried).items() if not isinstance(v, list)},
         "acc": finish.detail,
         "best": best_parameters(c, maps, best),
