@@ -8,6 +8,7 @@ import pytest
 from sfl_brain import messages as m
 from sfl_brain.local import run_local
 from sfl_brain.proposers import PROPOSERS, Outcome, Proposer
+from sfl_brain.records import read_records
 from sfl_brain.scenario import ScenarioError, load
 
 from .conftest import SCENARIOS, sfl
@@ -150,21 +151,13 @@ def test_bad_proposer_settings_are_one_clear_line(setting, path, says):
     assert done.returncode == 2 and "Traceback" not in done.stderr
 
 
-def test_a_run_over_processes_checkpoints_its_proposer(tmp_path):
-    """``sfl run`` with CMA-ES over processes: completed, and the checkpoint in the run folder is the proposer
-    after the last trial (it continues from there)."""
+def test_a_run_over_processes_checkpoints_its_proposer_and_matches_one_process(tmp_path):
+    """``sfl run`` with CMA-ES over processes: completed, the same records as in one process from the same seed,
+    and the checkpoint in the run folder is the proposer after the last trial (it continues from there)."""
     out = tmp_path / "run"
-    done = sfl(
-        "run",
-        str(LEARN),
-        "--set",
-        "protocol.trials=12",
-        "--set",
-        "protocol.proposer.kind=cma",
-        "--out",
-        str(out),
-        "--quiet",
-    )
+    sets = ["protocol.trials=12", "protocol.proposer.kind=cma"]
+    done = sfl("run", str(LEARN), *(x for s in sets for x in ("--set", s)), "--out", str(out), "--quiet")
     assert done.returncode == 0, done.stderr
+    assert stable(read_records(out)) == stable(run_local(load(LEARN, sets)))
     proposer = Proposer.restore(out / "proposer.pkl")
     assert proposer.params.kind == "cma" and proposer.es.countevals == 12
