@@ -25,7 +25,7 @@ from sfl_brain.run import run
 from sfl_brain.scenario import load
 
 ROOT = Path(__file__).resolve().parents[1]
-KINDS = ("sfl", "random", "cma", "tpe", "safe_tpe")
+KINDS = ("sfl", "random", "cma", "tpe", "safe_bo")
 
 
 def one_run(scenario: Path, kind: str, trials: int, seed: int) -> tuple[float, float, float, float]:

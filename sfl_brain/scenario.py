@@ -38,7 +38,7 @@ from yaml.nodes import MappingNode, ScalarNode, SequenceNode
 from . import messages as m
 from .body import Body, Controller
 from .module import Module
-from .proposers import NEEDS, PROPOSERS, CMAParams, RandomParams, SafeTPEParams, SFLParams, TPEParams
+from .proposers import NEEDS, PROPOSERS, CMAParams, RandomParams, SafeBOParams, SFLParams, TPEParams
 from .registry import ImplError, nearest, resolve
 from .signals import WiringError
 
@@ -85,7 +85,7 @@ class ModuleSpec(Strict):
     colocate: bool = Field(False, description="controllers: run inside each body worker's process")
 
 
-Proposer = Annotated[SFLParams | RandomParams | CMAParams | TPEParams | SafeTPEParams, Field(discriminator="kind")]
+Proposer = Annotated[SFLParams | RandomParams | CMAParams | TPEParams | SafeBOParams, Field(discriminator="kind")]
 
 
 class LearnProtocol(Strict):
@@ -104,7 +104,7 @@ class LearnProtocol(Strict):
     proposer: Proposer = Field(
         default_factory=SFLParams,
         description="what chooses each trial's parameters: sfl (the default: draws gated by ACC and vigilance; "
-        "batch, max_decisions and stall_decisions are its), random, cma, tpe or safe_tpe (sfl_brain.proposers)",
+        "batch, max_decisions and stall_decisions are its), random, cma, tpe or safe_bo (sfl_brain.proposers)",
     )
 
 

@@ -14,7 +14,7 @@ from sfl_brain.scenario import ScenarioError, load
 from .conftest import SCENARIOS, sfl
 
 LEARN = SCENARIOS / "analytic_learn.yaml"
-UNGATED = ["random", "cma", "tpe", "safe_tpe"]
+UNGATED = ["random", "cma", "tpe", "safe_bo"]
 
 
 class OpenGate:
@@ -82,7 +82,7 @@ def test_a_restored_proposer_asks_what_the_uninterrupted_one_asks(kind, tmp_path
     assert all(np.array_equal(a, b) for a, b in zip(straight[17:], rest, strict=True))
 
 
-@pytest.mark.parametrize("kind", ["cma", "tpe", "safe_tpe"])
+@pytest.mark.parametrize("kind", ["cma", "tpe", "safe_bo"])
 def test_a_model_based_proposer_learns_the_landscape(kind):
     """After 60 trials the model-based proposers try the successful disc more often than its share of the
     square (28 %): the tell reached them."""
@@ -138,7 +138,12 @@ def test_the_thesis_proposer_is_the_default_and_unchanged():
         ("protocol.proposer.kind=cmaes", "protocol.proposer.kind", "did you mean `cma`"),
         ("protocol.proposer={kind: cma, sigma0: 2}", "protocol.proposer.sigma0", "less than or equal to 1"),
         ("protocol.proposer={kind: tpe, n_startup_trials: 0}", "protocol.proposer.n_startup_trials", ">= 1"),
-        ("protocol.proposer={kind: safe_tpe, seed: 1}", "protocol.proposer.seed", "unknown key"),
+        ("protocol.proposer={kind: safe_bo, seed: 1}", "protocol.proposer.seed", "unknown key"),
+        (
+            "protocol.proposer={kind: safe_bo, min_success_probability: 1.5}",
+            "protocol.proposer.min_success_probability",
+            "less than or equal to 1",
+        ),
     ],
 )
 def test_bad_proposer_settings_are_one_clear_line(setting, path, says):

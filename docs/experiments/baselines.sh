@@ -13,7 +13,7 @@ OUT=${OUT:-runs/baselines}
 RESULTS=${RESULTS:-docs/results/baselines}
 JOBS=${JOBS:-2}
 SEEDS=${SEEDS:-0,1,2,3,4}
-PROPOSERS=${PROPOSERS:-sfl,random,cma,tpe,safe_tpe}
+PROPOSERS=${PROPOSERS:-sfl,random,cma,tpe,safe_bo}
 for body in planar humanoid; do
   status=0
   sfl study "scenarios/baselines_$body.yaml" --vary "protocol.proposer.kind=$PROPOSERS" --seeds "$SEEDS" \

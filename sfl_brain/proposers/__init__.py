@@ -4,10 +4,10 @@
 - ``random``: uniform random search, no gate;
 - ``cma``: CMA-ES (the ``cma`` package);
 - ``tpe``: TPE (Optuna);
-- ``safe_tpe``: Optuna's constrained TPE with failure as the constraint (a safe optimiser that models where
-  trials fail).
+- ``safe_bo``: constrained expected improvement, a safe Bayesian optimiser that models the probability of success
+  (scikit-learn's Gaussian processes).
 
-``cma`` and Optuna are imported only when their proposer is made (``pip install 'sfl-brain[baselines]'``).
+``cma``, Optuna and scikit-learn are imported only when their proposer is made (``pip install 'sfl-brain[baselines]'``).
 """
 
 from __future__ import annotations
@@ -15,8 +15,9 @@ from __future__ import annotations
 from .base import Gate, Outcome, Proposer, ProposerParams, Ungated
 from .cma_es import CMAES, CMAParams
 from .random_search import RandomParams, RandomSearch
+from .safe_bo import SafeBO, SafeBOParams
 from .sfl import SFLParams, SuccessFailure
-from .tpe import TPE, SafeTPE, SafeTPEParams, TPEParams
+from .tpe import TPE, TPEParams
 
 #: kind -> proposer class (its ``Params`` is what ``protocol.proposer`` validates against)
 PROPOSERS: dict[str, type[Proposer]] = {
@@ -24,11 +25,11 @@ PROPOSERS: dict[str, type[Proposer]] = {
     "random": RandomSearch,
     "cma": CMAES,
     "tpe": TPE,
-    "safe_tpe": SafeTPE,
+    "safe_bo": SafeBO,
 }
 
 #: the library each proposer needs, beyond sfl-brain's own dependencies
-NEEDS = {"cma": "cma", "tpe": "optuna", "safe_tpe": "optuna"}
+NEEDS = {"cma": "cma", "tpe": "optuna", "safe_bo": "sklearn"}
 
 __all__ = [
     "CMAES",
@@ -43,8 +44,8 @@ __all__ = [
     "RandomParams",
     "RandomSearch",
     "SFLParams",
-    "SafeTPE",
-    "SafeTPEParams",
+    "SafeBO",
+    "SafeBOParams",
     "SuccessFailure",
     "TPEParams",
     "Ungated",

@@ -1,12 +1,11 @@
-"""TPE (Optuna's ``TPESampler``) through Optuna's ask/tell interface, without the gate; and its constrained
-form, with failure as the constraint: the safe optimiser.
+"""TPE (Optuna's ``TPESampler``) through Optuna's ask/tell interface, without the gate.
 
-Each axis of the unit cube is a ``FloatDistribution(0, 1)``; the study maximises the score (eta for a
-success, 0 for a failure: :meth:`.Outcome.score`). ``safe_tpe`` tells the sampler each trial's failure as a
-constraint (``Trial.set_constraint``, Optuna >= 5: +1 violated for a fall, -1 satisfied for a success), so its model of
-where good points lie is built from feasible trials only and it ranks infeasible ones below every feasible
-one (Optuna's constrained TPE, after c-TPE, Watanabe & Hutter 2023). Both keep Optuna's defaults
-(``n_startup_trials`` 10 random trials first, univariate); the sampler's seed is the run's.
+Each axis of the unit cube is a ``FloatDistribution(0, 1)``; the study maximises the score (eta for a success, 0
+for a failure: :meth:`.Outcome.score`), with Optuna's defaults (``n_startup_trials`` 10 random trials first,
+univariate); the sampler's seed is the run's. Optuna's constrained form (failure told as a constraint with
+``Trial.set_constraint``) is not offered: it puts an infeasible trial in TPE's worse group, where a failure scored 0
+already is, and asked the very same points as this one in all five seeds of the planar study. The safe optimiser is
+:mod:`.safe_bo`.
 """
 
 from __future__ import annotations
@@ -27,12 +26,6 @@ class TPEParams(ProposerParams):
     multivariate: bool = Field(False, description="one joint model of all axes (Optuna's default: one per axis)")
 
 
-class SafeTPEParams(TPEParams):
-    """Optuna's TPE sampler with failure as a constraint."""
-
-    kind: Literal["safe_tpe"]
-
-
 class TPE(Ungated):
     Params = TPEParams
 
@@ -41,7 +34,6 @@ class TPE(Ungated):
         import optuna
 
         optuna.logging.set_verbosity(optuna.logging.WARNING)
-        self.constrained = params.kind == "safe_tpe"
         sampler = optuna.samplers.TPESampler(
             n_startup_trials=params.n_startup_trials,
             multivariate=params.multivariate,
@@ -57,10 +49,4 @@ class TPE(Ungated):
 
     def tell(self, v: np.ndarray, outcome: Outcome) -> None:
         trial, self.pending = self.pending, None
-        if self.constrained:
-            trial.set_constraint("failure", -1.0 if outcome.success else 1.0)
         self.study.tell(trial, outcome.score())
-
-
-class SafeTPE(TPE):
-    Params = SafeTPEParams
