@@ -387,8 +387,9 @@ def inspect(run_dir: Path, as_json: bool) -> None:
     if as_json:
         click.echo(json.dumps(summary))
         return
+    width = max(16, *map(len, summary))
     for k, v in summary.items():
-        click.echo(f"{k:>16}: {v:.4g}" if isinstance(v, float) else f"{k:>16}: {v}")
+        click.echo(f"{k:>{width}}: {v:.4g}" if isinstance(v, float) else f"{k:>{width}}: {v}")
 
 
 @main.command()

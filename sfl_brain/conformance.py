@@ -18,7 +18,7 @@ from pydantic import ValidationError
 from . import messages as m
 from .body import Body, Controller, InProcessLink
 from .module import Module
-from .signals import Signal, names
+from .signals import SENSOR_SLACK, Signal, names
 
 
 def sample_messages(module: Module) -> list[m.Message]:
@@ -73,7 +73,7 @@ class _CheckedLink(InProcessLink):
             f"{cls.__name__}: sensed {len(values)} values, declares {len(cls.SENSORS)}"
         )
         for signal, value in zip(cls.SENSORS, values.tolist(), strict=True):
-            slack = 0.01 * (signal.high - signal.low)  # joint stops and contacts are soft in physics
+            slack = SENSOR_SLACK * (signal.high - signal.low)  # joint stops and contacts are soft in physics
             assert signal.low - slack <= value <= signal.high + slack, (
                 f"{cls.__name__}: sensor {signal.name} = {value:g} {signal.unit} at tick {frame.tick}, "
                 f"outside its declared [{signal.low:g}, {signal.high:g}]"

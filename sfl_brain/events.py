@@ -11,11 +11,8 @@ Nothing here imports Zenoh; handlers run in the publisher's thread, one after an
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
-
-if TYPE_CHECKING:
-    from .protocols import Progress
+from dataclasses import dataclass, field
+from typing import Any
 
 
 # ---------------------------------------------------------------- the modules' lifecycle and faults
@@ -100,6 +97,57 @@ class TrialRecorded:
     """One finished trial's row (``kind: trial``)."""
 
     row: dict
+
+
+@dataclass
+class Progress:
+    """What the CLI shows while a run goes on."""
+
+    planned: int
+    trials: int = 0
+    successes: int = 0
+    decisions: int = 0
+    s_vig: float | None = None
+    last: dict = field(default_factory=dict)
+    #: the learn protocol's stall limits (None for protocols that cannot stall)
+    max_decisions: int | None = None
+    stall_decisions: int | None = None
+    #: no-go decisions since the last go
+    consecutive_nogo: int = 0
+    #: decisions per trial over the recent trials (learn protocol)
+    recent_decisions_per_trial: float | None = None
+
+    #: trials before the decisions per trial are extrapolated to the budget (before: only a long no-go run warns)
+    MIN_TRIALS_TO_EXTRAPOLATE = 10
+
+    def stall_warning(self) -> str | None:
+        """Why the run is likely to stop before its budget at the current no-go ratio, or None."""
+        if self.max_decisions is None:
+            return None
+        left = self.planned - self.trials
+        if left <= 0:
+            return None
+        if self.stall_decisions and self.consecutive_nogo >= self.stall_decisions // 4:
+            return (
+                f"stall likely: {self.consecutive_nogo} no-go decisions in a row "
+                f"(the run stops as stalled at {self.stall_decisions})"
+            )
+        per_trial = self.recent_decisions_per_trial
+        if per_trial is None and self.trials == 0 and self.decisions >= self.max_decisions // 10:
+            return f"stall likely: {self.decisions} decisions and no trial yet (cap {self.max_decisions})"
+        if per_trial is not None and self.trials < self.MIN_TRIALS_TO_EXTRAPOLATE:
+            per_trial = None  # one slow first trial (empty maps, a cautious vigilance) is not a rate
+        if per_trial is not None:
+            # a burst of no-go (a scheduled vigilance passing its cautious end) is not a stall: warn only when the
+            # run's own average rate predicts the cap as well as the recent one
+            per_trial = min(per_trial, self.decisions / self.trials)
+        if per_trial is not None and self.decisions + left * per_trial > self.max_decisions:
+            reachable = self.trials + int(max(0, self.max_decisions - self.decisions) / per_trial)
+            return (
+                f"stall likely: {per_trial:.0f} or more decisions per trial, lately and on average; the cap of "
+                f"{self.max_decisions} decisions stops the run near trial {reachable} of {self.planned}"
+            )
+        return None
 
 
 @dataclass(frozen=True)

@@ -348,6 +348,8 @@ def make_recording(run_id: str, rrd: str | None, viewer: str | None):
         return None
     import rerun as rr
 
+    from .rerun_sink import attach_sinks
+
     rec = rr.RecordingStream("sfl-brain", recording_id=run_id)
     attach_sinks(rec, rrd, viewer)
     return rec
@@ -377,18 +379,6 @@ def make_telemetry(
     table = MapTable(run_dir / "maps" / f"{part}.parquet", module=module.entity) if run_dir is not None else None
     rerun = RerunTelemetry(rec, module.entity, rates, trial_seconds, batch_seconds=2.0 if live else None)
     return TelemetryTee(rerun, table, rates=rates)
-
-
-def attach_sinks(rec, rrd: str | None, viewer: str | None) -> None:
-    """Send a recording to the run folder's file, to a live viewer, or to both at once."""
-    import rerun as rr
-
-    if viewer and rrd:
-        rec.set_sinks(rr.GrpcSink(viewer), rr.FileSink(rrd))
-    elif viewer:
-        rec.connect_grpc(viewer)
-    else:
-        rec.save(rrd)
 
 
 class Host:

@@ -32,6 +32,21 @@ def build(inst: Instance) -> Module:
     return module
 
 
+def controller_of(plan: Plan, body: Instance) -> Instance:
+    """The controller instance that drives the body worker ``body`` (colocated in it or a process of its own)."""
+    return body.colocated or next(i for i in plan.instances if i.name == body.routes["controller.sensors"])
+
+
+def build_body(plan: Plan, inst: Instance) -> Body:
+    """The body worker ``inst`` of the plan, with its controller behind an :class:`InProcessLink` when it takes
+    commands: what a trial request runs on in one process (here and in ``sfl_brain.gym``)."""
+    body = build(inst)
+    body.worker = inst.name
+    if body.COMMANDS:
+        body.link = InProcessLink(build(controller_of(plan, inst)))
+    return body
+
+
 class LocalModules:
     """Every instance of a plan in this process; a request is answered when it is submitted."""
 
@@ -40,15 +55,7 @@ class LocalModules:
         self.through_codec = through_codec
         self.modules: dict[str, Module] = {}
         for inst in plan.instances:
-            module = build(inst)
-            if isinstance(module, Body):
-                module.worker = inst.name
-                if module.COMMANDS:
-                    ctrl = inst.colocated or next(
-                        i for i in plan.instances if i.name == inst.routes["controller.sensors"]
-                    )
-                    module.link = InProcessLink(build(ctrl))
-            self.modules[inst.name] = module
+            self.modules[inst.name] = build_body(plan, inst) if inst.name in plan.bodies else build(inst)
         self._outcomes: dict[int, Outcome] = {}
         self._next = 0
 

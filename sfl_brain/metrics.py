@@ -49,7 +49,7 @@ def safe_learning(rows: Iterable[dict], k: int = K_GOOD, distinct: float = DISTI
     n = len(trials)
     success = np.array([bool(r["success"]) for r in trials], dtype=bool)
     eta = np.array([float(r["quality"]) if r["success"] else np.nan for r in trials], dtype=float)
-    points = np.array([r.get("v_unit") or [] for r in trials], dtype=float).reshape(n, -1)
+    points = np.array([r.get("v_unit") or [] for r in trials], dtype=float).reshape(n, -1) if n else np.zeros((0, 0))
     failures = np.cumsum(~success)
     with np.errstate(invalid="ignore"):
         best = np.fmax.accumulate(eta) if n else eta

@@ -8,7 +8,7 @@ from pathlib import Path
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from .protocols import Progress as RunProgress
+from .events import Progress as RunProgress
 from .scenario import Plan
 
 

@@ -15,13 +15,15 @@ import math
 import time
 from collections import Counter, deque
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from . import messages as m
-from .events import DecisionsMade, Events, ProgressUpdated, TrialInterrupted, TrialRecorded
+from .events import DecisionsMade, Events, Progress, ProgressUpdated, TrialInterrupted, TrialRecorded
+from .metrics import safe_learning
+from .proposers import PROPOSERS, Outcome, Proposer, SuccessFailure
 from .records import decision_row, point_fields, trial_row
 from .scenario import Plan
 from .service import Interrupted, ModuleService, RunError
@@ -32,57 +34,6 @@ MAX_TRIAL_RETRIES = 3
 def trial_seed(run_seed: int, trial_id: int) -> int:
     """Seed of one trial: the same whichever worker runs it."""
     return int(np.random.SeedSequence([run_seed, 7, trial_id]).generate_state(1)[0])
-
-
-@dataclass
-class Progress:
-    """What the CLI shows while a run goes on."""
-
-    planned: int
-    trials: int = 0
-    successes: int = 0
-    decisions: int = 0
-    s_vig: float | None = None
-    last: dict = field(default_factory=dict)
-    #: the learn protocol's stall limits (None for protocols that cannot stall)
-    max_decisions: int | None = None
-    stall_decisions: int | None = None
-    #: no-go decisions since the last go
-    consecutive_nogo: int = 0
-    #: decisions per trial over the recent trials (learn protocol)
-    recent_decisions_per_trial: float | None = None
-
-    #: trials before the decisions per trial are extrapolated to the budget (before: only a long no-go run warns)
-    MIN_TRIALS_TO_EXTRAPOLATE = 10
-
-    def stall_warning(self) -> str | None:
-        """Why the run is likely to stop before its budget at the current no-go ratio, or None."""
-        if self.max_decisions is None:
-            return None
-        left = self.planned - self.trials
-        if left <= 0:
-            return None
-        if self.stall_decisions and self.consecutive_nogo >= self.stall_decisions // 4:
-            return (
-                f"stall likely: {self.consecutive_nogo} no-go decisions in a row "
-                f"(the run stops as stalled at {self.stall_decisions})"
-            )
-        per_trial = self.recent_decisions_per_trial
-        if per_trial is None and self.trials == 0 and self.decisions >= self.max_decisions // 10:
-            return f"stall likely: {self.decisions} decisions and no trial yet (cap {self.max_decisions})"
-        if per_trial is not None and self.trials < self.MIN_TRIALS_TO_EXTRAPOLATE:
-            per_trial = None  # one slow first trial (empty maps, a cautious vigilance) is not a rate
-        if per_trial is not None:
-            # a burst of no-go (a scheduled vigilance passing its cautious end) is not a stall: warn only when the
-            # run's own average rate predicts the cap as well as the recent one
-            per_trial = min(per_trial, self.decisions / self.trials)
-        if per_trial is not None and self.decisions + left * per_trial > self.max_decisions:
-            reachable = self.trials + int(max(0, self.max_decisions - self.decisions) / per_trial)
-            return (
-                f"stall likely: {per_trial:.0f} or more decisions per trial, lately and on average; the cap of "
-                f"{self.max_decisions} decisions stops the run near trial {reachable} of {self.planned}"
-            )
-        return None
 
 
 class Conductor:
@@ -195,122 +146,116 @@ class Conductor:
         return point_fields(self.plan.scenario.space, unit)
 
 
-def run_learn(c: Conductor) -> dict:
-    """The success-failure learning cycle (Fig. 3.5 / 5.6): draw, evaluate, decide, trial, learn."""
+class Gate:
+    """The run's go/no-go decision as a proposer sees it (:class:`sfl_brain.proposers.Gate`): the ACC's
+    evaluation against vigilance's current threshold, with every decision recorded and counted."""
+
+    def __init__(self, c: Conductor, progress: Progress) -> None:
+        self.c = c
+        self.progress = progress
+        self.threshold: m.Threshold = c.call(m.VigilanceStart())
+        self.decision = 0  # decisions recorded
+        self.consecutive_nogo = 0
+        self.seconds = 0.0  # wall seconds waiting for the ACC's evaluations
+
+    def evaluate(self, candidates: np.ndarray) -> m.Evaluation:
+        started = time.perf_counter()
+        evaluation = self.c.call(m.Evaluate(candidates=candidates, s_vig=self.threshold.s_vig))
+        self.seconds += time.perf_counter() - started
+        return evaluation
+
+    def record(self, candidates: np.ndarray, evaluation: m.Evaluation, go_at: int | None, count: int) -> None:
+        rows = []
+        for i in range(count):
+            go = i == go_at
+            trial = self.progress.trials if go else None
+            d_s, d_f = evaluation.d_success[i], evaluation.d_failure[i]
+            point = self.c.point(candidates[i])
+            rows.append(decision_row(self.decision, trial, go, self.threshold.s_vig, d_s, d_f, point))
+            self.decision += 1
+            self.consecutive_nogo = 0 if go else self.consecutive_nogo + 1
+        self.c.record_decisions(rows)
+        self.progress.decisions = self.decision
+        self.progress.consecutive_nogo = self.consecutive_nogo
+        if go_at is None:
+            self.c.report_progress(self.progress)  # a long run of no-go decisions shows (and warns) while it lasts
+
+    def rejected(self, consecutive: int) -> None:
+        self.threshold = self.c.call(m.Rejected(consecutive=consecutive))
+
+
+def make_proposer(c: Conductor) -> Proposer:
+    """The scenario's ``protocol.proposer``, seeded from the run's seed."""
     proto = c.plan.scenario.protocol
-    dim = c.plan.dim
-    rng = np.random.default_rng(np.random.SeedSequence([c.plan.scenario.seed, 1]))
-    progress = Progress(planned=proto.trials, max_decisions=proto.max_decisions, stall_decisions=proto.stall_decisions)
-    threshold: m.Threshold = c.call(m.VigilanceStart())
+    spec = proto.proposer
+    cls = PROPOSERS[spec.kind]
+    if cls is SuccessFailure:
+        return SuccessFailure(
+            spec,
+            c.plan.dim,
+            c.plan.scenario.seed,
+            planned=proto.trials,
+            batch=proto.batch,
+            max_decisions=proto.max_decisions,
+            stall_decisions=proto.stall_decisions,
+        )
+    return cls(spec, c.plan.dim, c.plan.scenario.seed)
+
+
+#: the proposer's checkpoint in the run folder, written after every trial
+PROPOSER_CHECKPOINT = "proposer.pkl"
+
+
+def run_learn(c: Conductor) -> dict:
+    """The learning cycle (Fig. 3.5 / 5.6): ask the proposer, decide, trial, learn, tell, record.
+
+    Success-failure learning's proposer draws until ACC and vigilance say go; the others propose without
+    the gate (:mod:`sfl_brain.proposers`). The brain modules learn from every trial either way.
+    """
+    proto = c.plan.scenario.protocol
+    proposer = make_proposer(c)
+    progress = Progress(planned=proto.trials)
+    if proposer.GATED:
+        progress.max_decisions, progress.stall_decisions = proto.max_decisions, proto.stall_decisions
+    gate = Gate(c, progress)
     n_success = n_failure = 0
     best: tuple[float, int, np.ndarray] | None = None  # (eta, trial, v) of the highest-reward success
-    decision = 0
-    consecutive_nogo = 0
     stop_reason = f"trial budget spent ({proto.trials} trials)"
     stalled = False
     trial_decisions: deque[int] = deque(maxlen=20)  # decisions each recent trial took (progress estimate)
     decisions_at_last_trial = 0
-    # Candidates are drawn one stream, in order, whatever the batch: a batch is only how many of
-    # the next draws ACC evaluates in one request. Draws left over after a go are evaluated again
-    # (against the maps after learning) in the next request, so records do not depend on batch.
-    pool = np.empty((0, dim))
-    batch = min(8, proto.batch)
-    go_window: deque[int] = deque(maxlen=20)  # decisions per go, recent trials: sizes the next batch
-    last_go = -1  # index of the last go decision
+    tried: list[dict] = []  # the trial rows, for the run's safe-learning metrics
+    asking = telling = 0.0  # seconds in the proposer (benchmarks/proposers.py)
     while progress.trials < proto.trials:
-        if decision >= proto.max_decisions:
-            stalled = True
-            stop_reason = (
-                f"decision cap reached: {decision} decisions (protocol.max_decisions) gave "
-                f"{progress.trials} of {proto.trials} trials"
-            )
+        started = time.perf_counter()
+        v = proposer.ask(gate)
+        asking += time.perf_counter() - started
+        if v is None:
+            stalled, stop_reason = True, proposer.stop_reason
             break
-        if consecutive_nogo >= proto.stall_decisions:
-            stalled = True
-            stop_reason = (
-                f"no progress: {consecutive_nogo} decisions in a row without a trial (protocol.stall_decisions) "
-                f"after {progress.trials} of {proto.trials} trials"
-            )
-            break
-        if len(pool) < batch:
-            pool = np.concatenate([pool, rng.random((batch - len(pool), dim))])
-        candidates = pool[:batch]
-        evaluation: m.Evaluation = c.call(m.Evaluate(candidates=candidates, s_vig=threshold.s_vig))
-        rows = []
-        chosen = None
-        rejected_update = None
-        used = 0
-        for i in range(batch):
-            go = bool(evaluation.go[i])
-            rows.append(
-                decision_row(
-                    decision,
-                    progress.trials if go else None,
-                    go,
-                    threshold.s_vig,
-                    evaluation.d_success[i],
-                    evaluation.d_failure[i],
-                    c.point(candidates[i]),
-                )
-            )
-            decision += 1
-            used = i + 1
-            if go:
-                chosen = i
-                consecutive_nogo = 0
-                break
-            consecutive_nogo += 1
-            if consecutive_nogo % 1000 == 0:
-                rejected_update = consecutive_nogo
-                break  # the threshold may change: evaluate the next draws against the new one
-            if decision >= proto.max_decisions or consecutive_nogo >= proto.stall_decisions:
-                break
-        pool = pool[used:]
-        c.record_decisions(rows)
-        progress.decisions = decision
-        progress.consecutive_nogo = consecutive_nogo
-        if chosen is None:
-            c.report_progress(progress)  # a long run of no-go decisions shows (and warns) while it lasts
-        if chosen is None:  # no go in the whole batch: look further ahead next time
-            batch = min(proto.batch, 2 * batch)
-        else:
-            go_window.append(decision - 1 - last_go)
-            last_go = decision - 1
-            batch = min(proto.batch, max(4, 2 * max(go_window)))
-        if rejected_update is not None:
-            threshold = c.call(m.Rejected(consecutive=rejected_update))
-            continue
-        if chosen is None:
-            continue
-        v = candidates[chosen]
         trial_id = progress.trials
         ((request, result, wall),) = c.trials([c.trial_request(trial_id, v, c.should_log_body(trial_id))])
-        rho = None
-        if result.success:
-            reward: m.Reward = c.call(m.Grade(eta=result.quality))
-            rho = reward.rho
-            n_success += 1
-        else:
-            n_failure += 1
-        s_vig_used = threshold.s_vig
-        low, high = threshold.low, threshold.high
-        if result.success and (best is None or result.quality > best[0]):
-            best = (float(result.quality), trial_id, v.copy())  # the highest-reward trial so far (L1584)
-        learned, threshold = c.call_all(  # ACC and vigilance learn from the trial in parallel
-            m.Learn(
-                v=v,
-                success=result.success,
-                rho=rho if rho is not None else 1.0,
-                eta=float(result.quality) if result.success else None,
-            ),
+        eta = float(result.quality) if result.success else None
+        rho = c.call(m.Grade(eta=result.quality)).rho if result.success else None
+        n_success += int(result.success)
+        n_failure += int(not result.success)
+        s_vig_used, low, high = gate.threshold.s_vig, gate.threshold.low, gate.threshold.high
+        if result.success and (best is None or eta > best[0]):
+            best = (eta, trial_id, v.copy())  # the highest-reward trial so far (L1584)
+        learned, gate.threshold = c.call_all(  # ACC and vigilance learn from the trial in parallel
+            m.Learn(v=v, success=result.success, rho=rho if rho is not None else 1.0, eta=eta),
             m.TrialDone(trial_index=trial_id + 1, success=result.success, n_success=n_success, n_failure=n_failure),
         )
-        progress.s_vig = threshold.s_vig
-        trial_decisions.append(decision - decisions_at_last_trial)
-        decisions_at_last_trial = decision
+        started = time.perf_counter()
+        proposer.tell(v, Outcome(result.success, eta))
+        proposer.checkpoint(c.run_dir / PROPOSER_CHECKPOINT)
+        telling += time.perf_counter() - started
+        progress.s_vig = gate.threshold.s_vig
+        trial_decisions.append(gate.decision - decisions_at_last_trial)
+        decisions_at_last_trial = gate.decision
         progress.recent_decisions_per_trial = sum(trial_decisions) / len(trial_decisions)
         learning = {
-            "decision": decision - 1,
+            "decision": gate.decision - 1,
             "rho": rho,
             "n_success": n_success,
             "n_failure": n_failure,
@@ -323,12 +268,19 @@ def run_learn(c: Conductor) -> dict:
             "failure_winner": learned.failure_winner,
         }
         c.record_trial(progress, trial_id, result, wall, c.point(v), learning)
+        tried.append(progress.last)
     maps = (c.run_dir / "acc.npz").resolve()
     finish: m.Ack = c.call(m.Finish(path=str(maps), prune=proto.prune_failure_map))
     return {
         "planned_trials": proto.trials,
         "stalled": stalled,
         "stop_reason": stop_reason,
+        "proposer": proto.proposer.kind,
+        # wall seconds in the proposer's ask (``gate``: of which waiting for the ACC's evaluations, success-failure
+        # learning's decisions and every other proposer's record of what the gate would have said) and in its tell
+        # with the checkpoint
+        "proposer_seconds": {"ask": asking, "gate": gate.seconds, "tell": telling},
+        "safe_learning": {k: v for k, v in safe_learning(tried).items() if not isinstance(v, list)},
         "acc": finish.detail,
         "best": best_parameters(c, maps, best),
     }

@@ -25,6 +25,7 @@ import numpy as np
 
 from .events import DecisionsMade, Events, TrialRecorded
 from .messages import TrialResult
+from .metrics import safe_learning
 from .status import EnvironmentProblem
 
 SUMMARY_FIELDS = (
@@ -208,7 +209,15 @@ def inspect_run(run_dir: Path) -> dict:
         if started.exists():
             wall = max(0.0, (run_dir / "records.jsonl").stat().st_mtime - started.stat().st_mtime)
     damage: list[str] = []
-    counts = summarise(read_records(run_dir, damage), wall)
+    rows = read_records(run_dir, damage)
+    counts = summarise(rows, wall)
+    if any(r.get("kind") == "decision" for r in rows):  # a learn run: whichever proposer chose, and how safely
+        counts["proposer"] = stored.get("proposer", "sfl")
+        metrics = safe_learning(rows)
+        k = metrics["k"]
+        counts["failures_before_first_success"] = metrics["failures_before_first_success"]
+        counts[f"failures_before_{k}_gaits"] = metrics["failures_before_k"]
+        counts["distinct_gaits"] = metrics["distinct_gaits"]  # successes metrics.DISTINCT apart in the unit cube
     if stored.get("status"):
         head = {"status": stored["status"], "stop_reason": stored.get("stop_reason", stored.get("reason", ""))}
     else:

@@ -307,3 +307,13 @@ class RerunTelemetry:
             ),
         )
         self.recording.send_columns(grid, index, strips.columns(strips=edges).partition([per] * k))
+
+
+def attach_sinks(rec, rrd: str | None, viewer: str | None) -> None:
+    """Send a recording to the run folder's file, to a live viewer, or to both at once."""
+    if viewer and rrd:
+        rec.set_sinks(rr.GrpcSink(viewer), rr.FileSink(rrd))
+    elif viewer:
+        rec.connect_grpc(viewer)
+    else:
+        rec.save(rrd)

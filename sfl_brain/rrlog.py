@@ -31,6 +31,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from .rerun_sink import attach_sinks
 from .telemetry import FAILURE, SUCCESS
 
 log = logging.getLogger("sfl.rrlog")
@@ -334,8 +335,6 @@ class RerunLog:
         trial_seconds: float | None = None,
         layout: dict | None = None,
     ) -> None:
-        from .host import attach_sinks
-
         self.rec = rr.RecordingStream("sfl-brain", recording_id=run_id)
         attach_sinks(self.rec, rrd, viewer)
         # the default layout for this run (``layout``: :func:`blueprint`'s arguments, :func:`layout_of`), not forced

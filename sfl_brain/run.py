@@ -39,6 +39,7 @@ from .events import (
     ModuleAlive,
     ModuleDied,
     ModuleSilent,
+    Progress,
     ProgressUpdated,
     Restarted,
     TrialInterrupted,
@@ -47,7 +48,7 @@ from .events import (
     WorkerLeft,
 )
 from .processes import kill_quietly
-from .protocols import PROTOCOLS, Conductor, Progress
+from .protocols import PROTOCOLS, Conductor
 from .records import RecordWriter, read_records, record_to, summarise
 from .rrlog import RERUN_FLUSH_TIMEOUT, RerunLog, layout_of
 from .runtime import Supervisor

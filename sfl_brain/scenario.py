@@ -38,6 +38,7 @@ from yaml.nodes import MappingNode, ScalarNode, SequenceNode
 from . import messages as m
 from .body import Body, Controller
 from .module import Module
+from .proposers import NEEDS, PROPOSERS, CMAParams, RandomParams, SafeBOParams, SFLParams, TPEParams
 from .registry import ImplError, nearest, resolve
 from .signals import WiringError
 
@@ -84,6 +85,9 @@ class ModuleSpec(Strict):
     colocate: bool = Field(False, description="controllers: run inside each body worker's process")
 
 
+Proposer = Annotated[SFLParams | RandomParams | CMAParams | TPEParams | SafeBOParams, Field(discriminator="kind")]
+
+
 class LearnProtocol(Strict):
     """The success-failure learning cycle (Fig. 3.5 / 5.6)."""
 
@@ -97,6 +101,11 @@ class LearnProtocol(Strict):
         100_000, ge=1, description="a run with this many no-go decisions in a row ends `stalled` (no progress)"
     )
     prune_failure_map: bool = True
+    proposer: Proposer = Field(
+        default_factory=SFLParams,
+        description="what chooses each trial's parameters: sfl (the default: draws gated by ACC and vigilance; "
+        "batch, max_decisions and stall_decisions are its), random, cma, tpe or safe_bo (sfl_brain.proposers)",
+    )
 
 
 class SweepProtocol(Strict):
@@ -481,6 +490,8 @@ def _clean_loc(loc: tuple, kind: str) -> tuple:
         if (
             len(out) >= 2 and out[-2] == "analyses" and part in ("poincare", "trace", "pattern_space")
         ):  # an analysis's kind tag
+            continue
+        if out == ["protocol", "proposer"] and part in PROPOSERS:  # a proposer's kind tag
             continue
         out.append(part)
     if kind in EXPECTED and len(out) > 1 and out[-1] in _UNION_MEMBERS:
@@ -1100,6 +1111,17 @@ def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
     problems: list[Problem] = []
     classes: dict[str, tuple[type[Module], str, dict]] = {}
     dim = len(scenario.space)
+    if scenario.protocol.kind == "learn" and (library := NEEDS.get(scenario.protocol.proposer.kind)):
+        import importlib.util
+
+        if importlib.util.find_spec(library) is None:
+            problems.append(
+                Problem(
+                    "protocol.proposer.kind",
+                    f"expected a proposer whose library is installed: {scenario.protocol.proposer.kind!r} needs "
+                    f"{library!r} (pip install 'sfl-brain[baselines]'); got {scenario.protocol.proposer.kind!r}",
+                )
+            )
     for name, spec in scenario.modules.items():
         where = f"modules.{name}"
         try:  # an import that does not finish within timeouts.ready would not start either

@@ -18,6 +18,11 @@ import numpy as np
 
 from .registry import nearest
 
+#: how far, as a share of its range, a sensor's value may stray outside its declared bounds (``Signal``): physics'
+#: joint stops and contacts are soft (the conformance check allows this much; ``sfl_brain.gym`` widens its
+#: observation space by it)
+SENSOR_SLACK = 0.01
+
 
 @dataclass(frozen=True)
 class Signal:

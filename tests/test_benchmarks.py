@@ -72,3 +72,9 @@ def test_cpg_benchmark_prints_the_cost_per_tick_beside_the_physics():
     out = bench("cpg.py", "--ticks", "200")
     # planar and humanoid circuits (network and controller tick each), the stand-in and the 8-link walker physics
     figures(out, r"median +([\d.]+) us", count=6)
+
+
+def test_proposers_benchmark_prints_each_proposers_cost_beside_the_trial():
+    out = bench("proposers.py", "--trials", "8", "--repeats", "1", "--kinds", "sfl,cma")
+    assert "load average" in out
+    figures(out, r"  (?:sfl|cma) +[\d.]+ +[\d.]+ +[\d.]+ +[\d.]+ +([\d.]+) %", count=2)

@@ -73,8 +73,13 @@ def test_learn_run_records_everything_and_matches_in_process(tmp_path):
         "final_vigilance",
         "best_quality",
         "wall_time_s",
+        "proposer",  # a learn run: which proposer chose, and its safe-learning metrics (sfl_brain.metrics)
+        "failures_before_first_success",
+        "failures_before_10_gaits",
+        "distinct_gaits",
     }
     assert inspected["trials"] == 60 and inspected["no_go"] == summary["no_go"]
+    assert inspected["proposer"] == "sfl" and inspected["failures_before_first_success"] <= inspected["failures"]
     # sfl report draws the maps over the tried points and tabulates the run
     report = sfl("report", str(out), "--out", str(tmp_path / "report"))
     assert report.returncode == 0, report.stderr

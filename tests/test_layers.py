@@ -190,3 +190,69 @@ def test_retry_is_decided_by_the_remote_fault_type():
     assert str(cut) == "`body` failed on `body.trial`: LinkError: interrupted: no command for tick 5 within 1 s"
     failed = remote_fault("body", "body.trial", "ValueError: LinkError in a message is not a LinkError")
     assert type(failed) is RunError
+
+
+def import_graph() -> dict[str, set[str]]:
+    """Which of our modules each module of ``sfl_brain`` imports, anywhere in it (a function's deferred import and
+    a ``TYPE_CHECKING`` one count: each is a dependency a reader follows)."""
+    import ast
+
+    package = ROOT / "sfl_brain"
+
+    def name_of(path):
+        parts = list(path.relative_to(ROOT).with_suffix("").parts)
+        return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+    modules = {name_of(p): p for p in package.rglob("*.py")}
+    graph = {}
+    for name, path in modules.items():
+        here = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+        deps = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom):
+                base = here.split(".")[: len(here.split(".")) - node.level + 1] if node.level else []
+                target = ".".join([*base, *([node.module] if node.module else [])])
+                deps |= {f"{target}.{a.name}" if f"{target}.{a.name}" in modules else target for a in node.names}
+            elif isinstance(node, ast.Import):
+                deps |= {a.name for a in node.names}
+        graph[name] = {d for d in deps if d in modules and d != name}
+    return graph
+
+
+def circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected groups of more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    found = []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            group = []
+            while (w := stack.pop()) != v:
+                group.append(w)
+            if group:
+                found.append(sorted([v, *group]))
+
+    for v in graph:
+        if v not in index:
+            visit(v)
+    return found
+
+
+def test_no_module_imports_itself_back_through_others():
+    """No circle of imports (issue 22: ``events`` <-> ``protocols`` <-> ``records`` and ``host`` <-> ``rrlog`` were
+    broken): each layer can be read, and tested, after the ones it uses."""
+    graph = import_graph()
+    assert {"sfl_brain.protocols", "sfl_brain.events", "sfl_brain.proposers.sfl"} <= set(graph)
+    assert "sfl_brain.events" in graph["sfl_brain.protocols"]  # the graph sees our imports
+    assert circles(graph) == []
+    assert circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]

@@ -32,3 +32,8 @@ def test_a_run_that_never_gets_there_is_censored_not_zero():
     got = safe_learning([row(0, False, 0.0, [0.1]), row(1, False, 0.0, [0.2])], k=1)
     assert got["failures_before_first_success"] is None and got["failures_before_k"] is None
     assert got["best_eta"] is None and got["failures"] == 2
+
+
+def test_a_run_without_trials_has_metrics_too():
+    got = safe_learning([{"kind": "decision", "decision": 0}])
+    assert got["trials"] == 0 and got["failures"] == 0 and got["failures_before_first_success"] is None

@@ -14,7 +14,7 @@ from pathlib import Path
 import psutil
 import pytest
 
-from sfl_brain.protocols import Progress
+from sfl_brain.events import Progress
 from sfl_brain.records import RecordWriter, inspect_run, read_records
 from sfl_brain.status import EnvironmentProblem
 

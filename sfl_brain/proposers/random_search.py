@@ -1,0 +1,30 @@
+"""Random search: uniform draws in the unit cube, tried without the gate (the baseline the thesis's
+"trying parameters blindly" names)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+
+from .base import Outcome, ProposerParams, Ungated
+
+
+class RandomParams(ProposerParams):
+    """Uniform random search, no parameters."""
+
+    kind: Literal["random"]
+
+
+class RandomSearch(Ungated):
+    Params = RandomParams
+
+    def __init__(self, params: RandomParams, dim: int, seed: int) -> None:
+        super().__init__(params, dim, seed)
+        self.rng = np.random.default_rng(np.random.SeedSequence([seed, 1]))
+
+    def propose(self) -> np.ndarray:
+        return self.rng.random(self.dim)
+
+    def tell(self, v: np.ndarray, outcome: Outcome) -> None:
+        """Random search learns nothing."""
