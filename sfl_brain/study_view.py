@@ -27,7 +27,17 @@ class _Running:
     trials: int = 0
     successes: int = 0
     last_trial: float = field(default_factory=time.monotonic)
+    first_seen: tuple[float, int] | None = None  # (when, trials) of its first progress
     task: object = None
+
+    def eta(self, now: float) -> float | None:
+        """s until this run's last planned trial, at its rate since its first progress (None: not known yet)."""
+        if self.planned is None or self.first_seen is None:
+            return None
+        since, count = self.first_seen
+        if self.trials <= count or now <= since:
+            return None
+        return max(0, self.planned - self.trials) * (now - since) / (self.trials - count)
 
 
 class StudyView:
@@ -138,6 +148,7 @@ class StudyView:
                 if not self.quiet:
                     state.task = self.bar.add_task(f"  {event.name}", total=state.planned, status="")
             self.trials_here += max(0, event.trials - state.trials)
+            state.first_seen = state.first_seen or (now, event.trials)
             state.trials, state.successes, state.last_trial = event.trials, event.successes, now
         elif isinstance(event, RunFinished):
             state = self.running.pop(event.name, None)
@@ -171,7 +182,9 @@ class StudyView:
         self.bar.update(self.study_task, completed=self.trials_done(), status=self.status_text())
         for state in self.running.values():
             rate = f"success {state.successes / state.trials:.0%}" if state.trials else "starting"
-            status = f"{rate}, {_duration(now - state.since)}, on {state.where}"
+            eta = state.eta(now)
+            status = f"{rate}, {_duration(now - state.since)}{f', ETA {_duration(eta)}' if eta is not None else ''}"
+            status += f", on {state.where}"
             if now - state.last_trial > self.QUIET_AFTER:
                 status += f", no new trial for {_duration(now - state.last_trial)}"
             self.bar.update(state.task, completed=state.trials, status=status)
