@@ -122,3 +122,20 @@ def test_resuming_a_completed_run_or_a_sweep_is_bad_input_in_one_line(tmp_path):
     done = sfl("run", str(LEARN), "--resume", str(learnt), "--quiet")
     assert done.returncode == 2
     assert done.stderr.strip() == "sfl: --resume runs the folder's own scenario.yaml; drop SCENARIO"
+
+
+def test_a_replay_that_diverges_from_the_records_fails_naming_the_trial(tmp_path):
+    run_dir = tmp_path / "run"
+    assert sfl_run(LEARN, run_dir, "protocol.trials=10").returncode == 0
+    (run_dir / "summary.json").unlink()  # as after a kill -9
+    rows = [json.loads(line) for line in (run_dir / "records.jsonl").read_text().splitlines()]
+    tampered = next(r for r in rows if r["kind"] == "trial" and r["trial"] == 3)
+    tampered["v_unit"] = [0.5, 0.5]
+    (run_dir / "records.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+
+    done = sfl("run", "--resume", str(run_dir), "--quiet")
+    assert done.returncode == 1
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["status"] == "failed"
+    assert summary["stop_reason"].startswith("cannot resume: the replay diverged at trial 3: the proposer asked")
+    assert summary["trials"] == 10, "the records are kept as they were"
