@@ -213,12 +213,14 @@ def inspect_run(run_dir: Path) -> dict:
     rows = read_records(run_dir, damage)
     counts = summarise(rows, wall)
     if any(r.get("kind") == "decision" for r in rows):  # a learn run: whichever proposer chose, and how safely
+        wall_time = counts.pop("wall_time_s")  # stays last
         counts["proposer"] = stored.get("proposer", "sfl")
         metrics = safe_learning(rows)
         k = metrics["k"]
         counts["failures_before_first_success"] = metrics["failures_before_first_success"]
         counts[f"failures_before_{k}_gaits"] = metrics["failures_before_k"]
         counts["distinct_gaits"] = metrics["distinct_gaits"]  # successes metrics.DISTINCT apart in the unit cube
+        counts["wall_time_s"] = wall_time
     if stored.get("status"):
         head = {"status": stored["status"], "stop_reason": stored.get("stop_reason", stored.get("reason", ""))}
     else:

@@ -334,40 +334,6 @@ def test_sessions_run_zenoh_on_one_runtime_thread_unless_the_user_says_otherwise
     assert runtime == mine and "rx" in threads
 
 
-def test_sfl_study_runs_every_combination_and_plots_success_against_vigilance(tmp_path):
-    out = tmp_path / "study"
-    done = sfl(
-        "study",
-        SCENARIOS / "analytic_learn.yaml",
-        "--vary",
-        "modules.vigilance.params.value=0,-0.3",
-        "--seeds",
-        "0,1",
-        "--set",
-        "protocol.trials=30",
-        "--out",
-        str(out),
-        "--quiet",
-    )
-    assert done.returncode == 0, done.stderr
-    runs = sorted(p.name for p in out.iterdir() if (p / "scenario.yaml").exists())
-    assert runs == ["value-0.3_seed0", "value-0.3_seed1", "value0_seed0", "value0_seed1"]
-    assert json.loads((out / "value0_seed1" / "summary.json").read_text())["trials"] == 30
-    assert (out / "report" / "success_vs_vigilance_x-y.png").stat().st_size > 10_000
-    table = (out / "report" / "README.md").read_text()
-    assert "| -0.30 | 2 | 30 |" in table and "| +0.00 | 2 | 30 |" in table
-    # a bad combination is caught before anything runs
-    bad = sfl(
-        "study",
-        SCENARIOS / "analytic_learn.yaml",
-        "--vary",
-        "modules.vigilance.params.valu=0,1",
-        "--out",
-        str(tmp_path / "bad"),
-    )
-    assert bad.returncode == 2 and "did you mean `value`" in bad.stderr and not (tmp_path / "bad").exists()
-
-
 def test_the_body_polls_for_commands_only_while_polling_makes_ticks_shorter():
     from sfl_brain.host import SpinThenSleep
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -103,6 +105,7 @@ def stable(rows):
     return [{k: v for k, v in r.items() if k != "wall_ms"} for r in rows]
 
 
+@functools.cache
 def rows_of(kind: str, trials: int = 40) -> list[dict]:
     plan = load(LEARN, [f"protocol.trials={trials}", f"protocol.proposer.kind={kind}"])
     return run_local(plan)
@@ -111,7 +114,8 @@ def rows_of(kind: str, trials: int = 40) -> list[dict]:
 @pytest.mark.parametrize("kind", ["sfl", *UNGATED])
 def test_every_proposer_gives_the_same_records_in_a_real_run(kind):
     """The analytic body's learn run, every module real, in one process: the same columns whichever proposer
-    chose, one decision per trial without the gate, and the same records again from the same seed."""
+    chose, and one decision per trial without the gate (the same seed gives the same records: the tests above, and
+    over processes below)."""
     rows = rows_of(kind)
     trials = [r for r in rows if r["kind"] == "trial"]
     decisions = [r for r in rows if r["kind"] == "decision"]
@@ -122,7 +126,6 @@ def test_every_proposer_gives_the_same_records_in_a_real_run(kind):
     if kind != "sfl":
         assert len(decisions) == 40 and all(d["go"] for d in decisions)
         assert [d["trial"] for d in decisions] == list(range(40))
-    assert [r["v_unit"] for r in trials] == [r["v_unit"] for r in rows_of(kind) if r["kind"] == "trial"]
 
 
 def test_the_thesis_proposer_is_the_default_and_unchanged():
@@ -152,8 +155,9 @@ def test_bad_proposer_settings_are_one_clear_line(setting, path, says):
     text = str(err.value)
     assert path in text
     assert says.replace(">= 1", "greater than or equal to 1") in text
-    done = sfl("check", str(LEARN), "--set", setting)
-    assert done.returncode == 2 and "Traceback" not in done.stderr
+    if setting.endswith("cmaes"):  # and the command says it in one line, exit 2
+        done = sfl("check", str(LEARN), "--set", setting)
+        assert done.returncode == 2 and "Traceback" not in done.stderr and path in done.stderr
 
 
 def test_a_run_over_processes_checkpoints_its_proposer_and_matches_one_process(tmp_path):

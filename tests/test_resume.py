@@ -8,9 +8,11 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
-import pytest
+from sfl_brain.local import run_local
+from sfl_brain.scenario import load
 
 from .conftest import ROOT, SCENARIOS, poll_until, sfl, sfl_run, trials_recorded
 
@@ -48,9 +50,19 @@ def stop_after(out: Path, trials: int, sets: tuple[str, ...], signum: int) -> su
     return proc
 
 
-@pytest.mark.parametrize("proposer", ["sfl", "cma"])
-def test_an_interrupted_learn_run_resumes_to_the_records_of_an_uninterrupted_one(tmp_path, proposer):
-    sets = (f"protocol.trials={TRIALS}", f"protocol.proposer.kind={proposer}")
+def uninterrupted(sets: tuple[str, ...]) -> list[dict]:
+    """The rows (without wall times) and summary of the same run uninterrupted, in one process (the records are
+    the same as over processes: tests/test_e2e.py)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        rows = run_local(load(LEARN, list(sets)), Path(tmp))
+    for row in rows:
+        row.pop("wall_ms", None)
+    return rows
+
+
+def test_an_interrupted_learn_run_resumes_to_the_records_of_an_uninterrupted_one(tmp_path):
+    """CMA-ES, Ctrl-C (the thesis's own proposer is resumed after a kill -9 below)."""
+    sets = (f"protocol.trials={TRIALS}", "protocol.proposer.kind=cma")
     whole = tmp_path / "whole"
     assert sfl_run(LEARN, whole, *sets).returncode == 0
 
@@ -79,8 +91,6 @@ def test_an_interrupted_learn_run_resumes_to_the_records_of_an_uninterrupted_one
 def test_a_run_killed_with_sigkill_resumes_from_its_whole_rows(tmp_path):
     """No summary, a torn last line, unmerged recording parts: the resumed run still ends as the whole run."""
     sets = (f"protocol.trials={TRIALS}",)
-    whole = tmp_path / "whole"
-    assert sfl_run(LEARN, whole, *sets).returncode == 0
     killed = tmp_path / "killed"
     stop_after(killed, STOP_AFTER, sets, signal.SIGKILL)
     assert not (killed / "summary.json").exists()
@@ -89,7 +99,7 @@ def test_a_run_killed_with_sigkill_resumes_from_its_whole_rows(tmp_path):
 
     done = sfl("run", "--resume", str(killed), "--quiet")
     assert done.returncode == 0, done.stderr
-    assert rows_without_wall(killed) == rows_without_wall(whole)
+    assert rows_without_wall(killed) == uninterrupted(sets)
     summary = json.loads((killed / "summary.json").read_text())
     assert summary["status"] == "completed" and summary["trials"] == TRIALS
     assert not (killed / "rerun").exists(), "the killed run's parts were merged into recording.part1.rrd"

@@ -170,7 +170,8 @@ def test_study_with_jobs_runs_at_once_reports_the_groups_and_never_runs_a_comple
     numbers = json.loads((out / "report" / "study_summary.json").read_text())
     assert numbers["groups"]["value=0"]["runs"] == ["value0_seed0", "value0_seed1"]
     assert "| value0_seed0 | completed | learn |" in page  # the run table and the vigilance study are still there
-    assert (out / "report" / "success_vs_vigilance_x-y.png").exists()
+    assert (out / "report" / "success_vs_vigilance_x-y.png").stat().st_size > 10_000
+    assert "| -0.30 | 2 | 30 |" in page and "| +0.00 | 2 | 30 |" in page
 
     # the same command again: nothing runs; a run whose summary is gone (killed) runs again from scratch
     before = _mtimes(out)
@@ -277,6 +278,8 @@ def test_bad_study_options_exit_2_in_one_line_before_anything_runs(tmp_path):
     assert done.returncode == 2 and done.stderr == "sfl: --vary a.b: 1 given twice\n"
     done = sfl("study", str(LEARN), "--out", str(out), "--jobs", "2", "--cluster", "tcp://127.0.0.1:9")
     assert done.returncode == 2 and done.stderr.startswith("sfl: --jobs and --cluster: choose one")
+    done = sfl("study", str(LEARN), "--vary", "modules.vigilance.params.valu=0,1", "--out", str(out))
+    assert done.returncode == 2 and "did you mean `value`" in done.stderr  # every combination checked first
     assert not out.exists()
 
 
