@@ -83,7 +83,7 @@ def check(scenario: str, overrides: tuple[str, ...]) -> None:
 
 
 @main.command("run")
-@click.argument("scenario", type=click.Path(dir_okay=False))
+@click.argument("scenario", type=click.Path(dir_okay=False), required=False)
 @click.option("--set", "overrides", multiple=True, metavar="KEY.PATH=VALUE", help="override a scenario value")
 @click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=None, help="override the scenario's seed")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None, help="run folder")
@@ -98,15 +98,35 @@ def check(scenario: str, overrides: tuple[str, ...]) -> None:
     default=None,
     help="a Zenoh JSON5 config merged under sfl's own (TLS for network endpoints; docs/reliability.md)",
 )
+@click.option(
+    "--resume",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="go on with the interrupted learn run in this folder (its own scenario.yaml; no SCENARIO)",
+)
 @click.option("--quiet", is_flag=True, help="no progress bar")
 def run_command(
-    scenario, overrides, seed, out, viewer, viewer_url, realtime, listen, connect, zenoh_config, quiet
+    scenario, overrides, seed, out, viewer, viewer_url, realtime, listen, connect, zenoh_config, resume, quiet
 ) -> None:
-    """Run SCENARIO: one process per module, until the protocol completes."""
+    """Run SCENARIO: one process per module, until the protocol completes (--resume RUN_DIR: go on with an
+    interrupted learn run, replaying its recorded trials first)."""
     from .progress import ProgressView
-    from .run import run
+    from .run import prepare_resume, run
 
-    plan = _load_or_exit(scenario, overrides, seed)
+    resumed = None
+    if resume is not None:
+        options = (("SCENARIO", scenario), ("--set", overrides), ("--seed", seed), ("--out", out))
+        given = [name for name, value in options if value not in (None, ())]
+        if given:
+            click.echo(f"sfl: --resume runs the folder's own scenario.yaml; drop {', '.join(given)}", err=True)
+            sys.exit(EXIT_BAD_INPUT)
+        plan, resumed = _start_or_exit(lambda: prepare_resume(resume))
+        scenario, out = str(resume / "scenario.yaml"), resume
+    elif scenario is None:
+        click.echo("sfl: run needs a SCENARIO (or --resume RUN_DIR)", err=True)
+        sys.exit(EXIT_BAD_INPUT)
+    else:
+        plan = _load_or_exit(scenario, overrides, seed)
     view = ProgressView(plan, enabled=not quiet)
 
     def ready(sup, seconds):
@@ -136,6 +156,7 @@ def run_command(
                 on_progress=view.update,
                 on_ready=ready,
                 zenoh_config=zenoh_config,
+                resume=resumed,
             )
         )
     view.report(run_dir, summary)

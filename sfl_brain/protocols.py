@@ -11,6 +11,7 @@ log and the progress bar from them.
 from __future__ import annotations
 
 import itertools
+import json
 import math
 import time
 from collections import Counter, deque
@@ -24,7 +25,7 @@ from . import messages as m
 from .events import DecisionsMade, Events, Progress, ProgressUpdated, TrialInterrupted, TrialRecorded
 from .metrics import safe_learning
 from .proposers import PROPOSERS, Outcome, Proposer, SuccessFailure
-from .records import decision_row, point_fields, trial_row
+from .records import decision_row, plain, point_fields, trial_row
 from .scenario import Plan
 from .service import Interrupted, ModuleService, RunError
 
@@ -37,14 +38,22 @@ def trial_seed(run_seed: int, trial_id: int) -> int:
 
 
 class Conductor:
-    """The protocol's view of the running modules, and where it publishes what it does."""
+    """The protocol's view of the running modules, and where it publishes what it does.
 
-    def __init__(self, plan: Plan, modules: ModuleService, events: Events, run_dir: Path) -> None:
+    ``replay``: the trial rows of an interrupted learn run (``sfl run --resume``), which ``run_learn`` replays
+    before it goes on. While ``replaying``, nothing is published: the rows are in the records already.
+    """
+
+    def __init__(
+        self, plan: Plan, modules: ModuleService, events: Events, run_dir: Path, replay: list[dict] | None = None
+    ) -> None:
         self.plan = plan
         self.modules = modules
         self.events = events
         self.run_dir = run_dir
         self.providers = plan.providers
+        self.replay = list(replay or [])
+        self.replaying = False
 
     def call(self, message: m.Message) -> m.Message:
         return self.call_all(message)[0]
@@ -105,7 +114,8 @@ class Conductor:
                 yield request, outcome, time.perf_counter() - started
 
     def record_decisions(self, rows: list[dict]) -> None:
-        self.events.publish(DecisionsMade(rows))
+        if not self.replaying:
+            self.events.publish(DecisionsMade(rows))
 
     def record_trial(
         self,
@@ -121,11 +131,13 @@ class Conductor:
         progress.successes += int(result.success)
         row = trial_row(trial, result, wall, progress.successes / progress.trials, point, learning)
         progress.last = row
-        self.events.publish(TrialRecorded(row))
-        self.events.publish(ProgressUpdated(progress))
+        if not self.replaying:
+            self.events.publish(TrialRecorded(row))
+            self.events.publish(ProgressUpdated(progress))
 
     def report_progress(self, progress: Progress) -> None:
-        self.events.publish(ProgressUpdated(progress))
+        if not self.replaying:
+            self.events.publish(ProgressUpdated(progress))
 
     def trial_request(self, trial_id: int, unit: np.ndarray, log: bool) -> m.TrialRequest:
         physical = self.plan.to_physical(unit)
@@ -227,14 +239,20 @@ def run_learn(c: Conductor) -> dict:
     tried: list[dict] = []  # the trial rows, for the run's safe-learning metrics
     asking = telling = 0.0  # seconds in the proposer (benchmarks/proposers.py)
     while progress.trials < proto.trials:
+        c.replaying = progress.trials < len(c.replay)  # a resumed run's recorded trials: learnt again, not re-run
         started = time.perf_counter()
         v = proposer.ask(gate)
         asking += time.perf_counter() - started
         if v is None:
+            if c.replaying:
+                raise RunError(replay_diverged(progress.trials, f"the proposer stopped ({proposer.stop_reason})"))
             stalled, stop_reason = True, proposer.stop_reason
             break
         trial_id = progress.trials
-        ((request, result, wall),) = c.trials([c.trial_request(trial_id, v, c.should_log_body(trial_id))])
+        if c.replaying:
+            result, wall = recorded_trial(trial_id, v, c.replay[trial_id])
+        else:
+            ((request, result, wall),) = c.trials([c.trial_request(trial_id, v, c.should_log_body(trial_id))])
         eta = float(result.quality) if result.success else None
         rho = c.call(m.Grade(eta=result.quality)).rho if result.success else None
         n_success += int(result.success)
@@ -248,7 +266,8 @@ def run_learn(c: Conductor) -> dict:
         )
         started = time.perf_counter()
         proposer.tell(v, Outcome(result.success, eta))
-        proposer.checkpoint(c.run_dir / PROPOSER_CHECKPOINT)
+        if not c.replaying:  # the checkpoint of the trial the records end with is on disk already
+            proposer.checkpoint(c.run_dir / PROPOSER_CHECKPOINT)
         telling += time.perf_counter() - started
         progress.s_vig = gate.threshold.s_vig
         trial_decisions.append(gate.decision - decisions_at_last_trial)
@@ -268,7 +287,10 @@ def run_learn(c: Conductor) -> dict:
             "failure_winner": learned.failure_winner,
         }
         c.record_trial(progress, trial_id, result, wall, c.point(v), learning)
+        if c.replaying:
+            check_replayed(trial_id, progress.last, c.replay[trial_id])
         tried.append(progress.last)
+    c.replaying = False
     maps = (c.run_dir / "acc.npz").resolve()
     finish: m.Ack = c.call(m.Finish(path=str(maps), prune=proto.prune_failure_map))
     return {
@@ -284,6 +306,39 @@ def run_learn(c: Conductor) -> dict:
         "acc": finish.detail,
         "best": best_parameters(c, maps, best),
     }
+
+
+def replay_diverged(trial: int, what: str) -> str:
+    return (
+        f"cannot resume: the replay diverged at trial {trial}: {what}; the records after it cannot be those of an "
+        "uninterrupted run (was the run made with other code? provenance.json says which)"
+    )
+
+
+def recorded_trial(trial: int, v: np.ndarray, row: dict) -> tuple[m.TrialResult, float]:
+    """The outcome a resumed run's records hold for ``trial`` (result, wall seconds), once the replayed proposer
+    has asked the point the row was tried at."""
+    if not np.array_equal(v, np.asarray(row.get("v_unit"), dtype=float)):
+        raise RunError(replay_diverged(trial, f"the proposer asked {v.tolist()}, the records hold {row.get('v_unit')}"))
+    metrics = {k.removeprefix("m_"): value for k, value in row.items() if k.startswith("m_")}
+    quality = row.get("quality")
+    result = m.TrialResult(
+        trial_id=trial,
+        success=bool(row["success"]),
+        quality=float("nan") if quality is None else float(quality),
+        metrics=metrics,
+        worker=str(row.get("worker", "")),
+    )
+    return result, float(row.get("wall_ms") or 0.0) / 1e3
+
+
+def check_replayed(trial: int, row: dict, recorded: dict) -> None:
+    """A replayed trial's row must be the recorded one (its decision, vigilance, the maps' change...): else the
+    brain modules did not reach the state they had."""
+    replayed = json.loads(json.dumps(plain(row)))
+    for key in sorted(set(replayed) | set(recorded)):
+        if key != "wall_ms" and replayed.get(key) != recorded.get(key):
+            raise RunError(replay_diverged(trial, f"{key} is {replayed.get(key)!r}, recorded {recorded.get(key)!r}"))
 
 
 def best_parameters(c: Conductor, maps: Path, best: tuple[float, int, np.ndarray] | None) -> dict | None:

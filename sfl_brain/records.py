@@ -41,7 +41,8 @@ SUMMARY_FIELDS = (
 )
 
 
-def _plain(value: Any) -> Any:
+def plain(value: Any) -> Any:
+    """``value`` as JSON holds it in the records: numpy values as Python's, a non-finite float as None."""
     if isinstance(value, np.ndarray):
         return value.tolist()
     if isinstance(value, np.generic):
@@ -49,9 +50,9 @@ def _plain(value: Any) -> Any:
     if isinstance(value, float) and not math.isfinite(value):
         return None
     if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
+        return {k: plain(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_plain(v) for v in value]
+        return [plain(v) for v in value]
     return value
 
 
@@ -77,11 +78,11 @@ class RecordWriter:
             raise EnvironmentProblem(f"cannot write {self.path}: {exc.strerror or exc}") from None
 
     def write(self, row: dict) -> None:
-        self._append(json.dumps(_plain(row), separators=(",", ":")) + "\n")
+        self._append(json.dumps(plain(row), separators=(",", ":")) + "\n")
 
     def write_many(self, rows: list[dict]) -> None:
         if rows:
-            self._append("".join(json.dumps(_plain(r), separators=(",", ":")) + "\n" for r in rows))
+            self._append("".join(json.dumps(plain(r), separators=(",", ":")) + "\n" for r in rows))
 
     def close(self) -> None:
         try:

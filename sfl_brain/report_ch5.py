@@ -38,8 +38,12 @@ THESIS_E51 = {"highest": 0.60, "lowest": 0.40, "successes": 0.16}  # L1689-1691,
 
 
 def is_ch5_run(scenario: dict) -> bool:
+    """A learn run of chapter 5's space by success-failure learning (another proposer's run is a baseline's, compared
+    in the study section, not in the thesis's terms)."""
     axes = {a.get("name") for a in scenario.get("space", [])}
-    return scenario.get("protocol", {}).get("kind") == "learn" and {"gain_pitch", "gain_roll", "sigma_s"} <= axes
+    protocol = scenario.get("protocol", {})
+    proposer = (protocol.get("proposer") or {}).get("kind", "sfl")
+    return protocol.get("kind") == "learn" and {"gain_pitch", "gain_roll", "sigma_s"} <= axes and proposer == "sfl"
 
 
 def setting(scenario: dict) -> dict:

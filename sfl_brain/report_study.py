@@ -303,9 +303,9 @@ def _cell(values, censored: list | None = None, digits: str = ".3g") -> str:
 def group_table(groups: dict[str, list[RunMetrics]], settings: StudySettings) -> list[str]:
     """The Markdown table of the groups: mean ± 95 % CI half-width over each group's completed runs."""
     lines = [
-        f"| group | seeds | failures before first success | failures before K={settings.k} | "
-        f"success rate, last {settings.window} trials | best eta | wall time, s |",
-        "|---|---|---|---|---|---|---|",
+        f"| group | seeds | failures before first success | failures before K={settings.k} | failures, all trials | "
+        f"success rate, all trials | success rate, last {settings.window} trials | best eta | wall time, s |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for label, runs in groups.items():
         m = [r.metrics for r in runs]
@@ -319,7 +319,9 @@ def group_table(groups: dict[str, list[RunMetrics]], settings: StudySettings) ->
         eta += f" ({no_success} without a success)" if no_success else ""
         lines.append(
             f"| {label} | {len(runs)} | {_cell([v for v in first if v is not None], never)} "
-            f"| {_cell([v for v in before_k if v is not None], short)} | {_cell(final, digits='.2f')} | {eta} "
+            f"| {_cell([v for v in before_k if v is not None], short)} "
+            f"| {_cell([x['failures'] for x in m], digits='.1f')} "
+            f"| {_cell([x['success_rate'] for x in m], digits='.2f')} | {_cell(final, digits='.2f')} | {eta} "
             f"| {_cell([r.wall_s for r in runs], digits='.1f')} |"
         )
     return lines

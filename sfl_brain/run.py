@@ -28,6 +28,7 @@ import time
 import traceback
 import uuid
 from collections.abc import Callable
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -49,10 +50,10 @@ from .events import (
 )
 from .processes import kill_quietly
 from .protocols import PROTOCOLS, Conductor
-from .records import RecordWriter, read_records, record_to, summarise
+from .records import RecordWriter, read_records, record_to, run_status, summarise
 from .rrlog import RERUN_FLUSH_TIMEOUT, RerunLog, layout_of
 from .runtime import Supervisor
-from .scenario import Plan
+from .scenario import Plan, ScenarioError, load
 from .service import RunError
 from .status import EXIT_CODES, EXIT_ENVIRONMENT, BadInput, EnvironmentProblem, RunStatus
 from .tables import write_tables
@@ -153,6 +154,101 @@ def prepare_run_dir(run_dir: Path) -> None:
         probe.unlink()
     except OSError as exc:
         raise EnvironmentProblem(f"cannot write the run folder {run_dir}: {exc.strerror or exc}") from None
+
+
+@dataclass(frozen=True, kw_only=True)
+class Resume:
+    """Where an interrupted learn run goes on from (``sfl run --resume RUN_DIR``).
+
+    The run replays ``trials`` (its trial rows, in order: the proposer asks again, the brain modules learn again from
+    the recorded outcomes, nothing is re-run or re-recorded) and then runs the rest of its budget, appending to its
+    records: the records and recording are those an uninterrupted run would have made.
+    """
+
+    #: the trial rows recorded, replayed in order
+    trials: list[dict]
+    #: records.jsonl up to its last trial row; what follows (the decisions of the trial in flight, a torn line) goes
+    keep_bytes: int
+    #: the run id (and Rerun recording id) the run had, when the folder says it
+    run_id: str | None
+    #: wall seconds the run had taken before (summary.json; else the records' last write after ``started``)
+    wall_time_s: float | None
+
+
+def prepare_resume(run_dir: Path) -> tuple[Plan, Resume]:
+    """The scenario of an interrupted learn run and where it goes on from, or :class:`BadInput` in one line: a
+    folder that holds no run, a run that is not a learn run, or one that ended on its own (``completed``, ``stalled``).
+    Reads only: the folder changes when the resumed run starts (:func:`continue_run_dir`)."""
+    run_dir = Path(run_dir)
+    scenario = run_dir / "scenario.yaml"
+    if not run_dir.is_dir() or not scenario.is_file() or not (run_dir / "records.jsonl").is_file():
+        raise BadInput(f"--resume {run_dir} is not a run folder (no scenario.yaml and records.jsonl)")
+    status, _ = run_status(run_dir)
+    if status in (RunStatus.COMPLETED, RunStatus.STALLED):
+        raise BadInput(f"--resume {run_dir}: the run is {status}, nothing to resume (only an unfinished learn run)")
+    try:
+        plan = load(scenario)
+    except ScenarioError as exc:
+        raise BadInput(f"--resume {run_dir}: its scenario.yaml is not valid: {str(exc).splitlines()[-1]}") from None
+    kind = plan.scenario.protocol.kind
+    if kind != "learn":
+        raise BadInput(f"--resume {run_dir}: a {kind} run; only a learn run can be resumed (run it again instead)")
+    rows = read_records(run_dir)  # up to the last whole row
+    last = max((i for i, r in enumerate(rows) if r.get("kind") == "trial"), default=-1)
+    keep_bytes = 0
+    with open(run_dir / "records.jsonl", "rb") as f:  # rows are read line by line: row i is line i
+        for _, line in zip(range(last + 1), f, strict=False):
+            keep_bytes += len(line)
+    stored = {}
+    for name in ("summary.json", "provenance.json"):
+        try:
+            loaded = json.loads((run_dir / name).read_text())
+        except (OSError, ValueError):
+            continue
+        if isinstance(loaded, dict):
+            stored = {**loaded, **stored}
+    wall = stored.get("wall_time_s")
+    if wall is None and (run_dir / "started").exists():
+        wall = max(0.0, (run_dir / "records.jsonl").stat().st_mtime - (run_dir / "started").stat().st_mtime)
+    run_id = stored.get("run_id")
+    return plan, Resume(
+        trials=[r for r in rows if r.get("kind") == "trial"],
+        keep_bytes=keep_bytes,
+        run_id=run_id if isinstance(run_id, str) and run_id else None,
+        wall_time_s=wall,
+    )
+
+
+def continue_run_dir(run_dir: Path, resume: Resume) -> list[str]:
+    """Make an interrupted run's folder ready to go on; returns the previous recordings' names.
+
+    ``records.jsonl`` is cut after its last trial row (the resumed run appends what follows); the recording made so
+    far (``recording.rrd``, merged first from ``rerun/`` after a kill -9) becomes ``recording.part<N>.rrd`` (same
+    recording id: ``rerun rrd merge`` joins them); the old ``summary.json`` goes (a resumed run that is killed is
+    unfinished again)."""
+    try:
+        with open(run_dir / "records.jsonl", "r+b") as f:
+            f.truncate(resume.keep_bytes)
+            if resume.keep_bytes:
+                f.seek(resume.keep_bytes - 1)
+                if f.read(1) != b"\n":  # a last row whole but for its end of line
+                    f.write(b"\n")
+        parts = run_dir / "rerun"
+        if parts.is_dir() and any(parts.glob("*.rrd")):
+            merge_recordings(run_dir)
+        previous = sorted(run_dir.glob("recording.part*.rrd"))
+        number = len(previous) + 1
+        if parts.is_dir() and any(parts.glob("*.rrd")):  # could not be merged: kept whole, beside
+            parts.rename(run_dir / f"rerun.part{number}")
+        if (run_dir / "recording.rrd").exists():
+            (run_dir / "recording.rrd").rename(run_dir / f"recording.part{number}.rrd")
+        (run_dir / "summary.json").unlink(missing_ok=True)
+        probe = run_dir / ".sfl-write-probe"
+        probe.write_bytes(b"ok")
+        probe.unlink()
+    except OSError as exc:
+        raise EnvironmentProblem(f"cannot write the run folder {run_dir}: {exc.strerror or exc}") from None
+    return sorted(p.name for p in run_dir.glob("recording.part*.rrd"))
 
 
 def self_contained(plan: Plan, run_dir: Path) -> dict:
@@ -280,8 +376,10 @@ def run(
     on_progress: Callable[[Progress], None] | None = None,
     on_ready: Callable[[Supervisor, float], None] | None = None,
     zenoh_config: str | Path | None = None,
+    resume: Resume | None = None,
 ) -> tuple[Path, dict]:
-    """Run a scenario plan to its end; returns (run folder, summary).
+    """Run a scenario plan to its end; returns (run folder, summary). ``resume``: go on with the interrupted learn
+    run in ``out`` (:func:`prepare_resume`) instead of starting a new folder.
 
     Raises :class:`BadInput` or :class:`EnvironmentProblem` only before anything started (a run
     folder that holds a run or cannot be written, no display for ``--viewer``). After that it
@@ -291,14 +389,19 @@ def run(
     run_dir = Path(out) if out else default_run_dir(plan)
     if viewer is True:
         check_viewer()
-    prepare_run_dir(run_dir)
+    if resume is None:
+        prepare_run_dir(run_dir)
     viewer_proc, viewer_url = None, None
     if viewer:
         viewer_proc, viewer_url = start_viewer() if viewer is True else (None, viewer)
-    run_id = uuid.uuid4().hex[:12]
-    (run_dir / "scenario.yaml").write_text(yaml.safe_dump(self_contained(plan, run_dir), sort_keys=False))
-    (run_dir / "provenance.json").write_text(json.dumps(provenance(), indent=2) + "\n")
-    (run_dir / "started").write_text(datetime.now().isoformat() + "\n")
+    run_id = (resume and resume.run_id) or uuid.uuid4().hex[:12]  # resumed: the same recording id
+    previous_recordings: list[str] = []
+    if resume is None:
+        (run_dir / "scenario.yaml").write_text(yaml.safe_dump(self_contained(plan, run_dir), sort_keys=False))
+        (run_dir / "provenance.json").write_text(json.dumps({**provenance(), "run_id": run_id}, indent=2) + "\n")
+        (run_dir / "started").write_text(datetime.now().isoformat() + "\n")
+    else:  # the scenario, provenance and start stay the run's; the records and recording go on
+        previous_recordings = continue_run_dir(run_dir, resume)
     writer = RecordWriter(run_dir / "records.jsonl")
     events = Events()
     sup = Supervisor(
@@ -321,6 +424,8 @@ def run(
         plan.trial_seconds,
         layout_of(plan),
     )
+    if resume is not None:
+        rr_log._next_trial = len(resume.trials)  # the trial the resumed run's first no-go decisions are drawn for
     record_to(events, writer, decisions=plan.scenario.record.decisions)
     events.subscribe(DecisionsMade, lambda e: rr_log.decisions(e.rows))
     events.subscribe(TrialRecorded, lambda e: rr_log.trial(e.row))
@@ -349,7 +454,7 @@ def run(
             sup.start()
             if on_ready:
                 on_ready(sup, time.perf_counter() - started)
-            conductor = Conductor(plan, sup, events, run_dir)
+            conductor = Conductor(plan, sup, events, run_dir, replay=resume.trials if resume else None)
             extra = PROTOCOLS[plan.scenario.protocol.kind](conductor)
         except (KeyboardInterrupt, _Terminate):
             status, reason = RunStatus.INTERRUPTED, "stopped by signal (Ctrl-C or SIGTERM)"
@@ -390,11 +495,15 @@ def run(
         status, reason = _judge(extra, sum(1 for r in rows if r.get("kind") == "trial"))
     if status == RunStatus.INTERRUPTED and stopping["signals"] > 1:
         reason += "; stopped at once by a second signal"
+    wall = time.perf_counter() - started
+    if resume is not None:
+        wall += resume.wall_time_s or 0.0
+        extra = {**extra, "resumed_from_trial": len(resume.trials), "previous_recordings": previous_recordings}
     summary = {
         "status": str(status),
         "stop_reason": reason,
         "exit_code": exit_code if exit_code is not None else EXIT_CODES[status],
-        **summarise(rows, time.perf_counter() - started),
+        **summarise(rows, wall),
         "planned_trials": extra.get("planned_trials"),
         "run_id": run_id,
         "scenario": plan.scenario.name,

@@ -191,6 +191,42 @@ def test_study_with_jobs_runs_at_once_reports_the_groups_and_never_runs_a_comple
     assert "failures before K=2" in page and "success rate, last 10 trials" in page
 
 
+def test_a_study_of_two_proposers_over_two_seeds_compares_them(tmp_path):
+    """Issue 22's study, small: success-failure learning against CMA-ES, two seeds each, over processes; each run
+    records its proposer and its safe-learning metrics, and the report compares the two groups."""
+    out = tmp_path / "study"
+    done = sfl(
+        "study",
+        str(LEARN),
+        "--vary",
+        "protocol.proposer.kind=sfl,cma",
+        "--seeds",
+        "0,1",
+        "--set",
+        "protocol.trials=25",
+        "--out",
+        str(out),
+        "--jobs",
+        "2",
+        "--quiet",
+        "--k",
+        "3",
+        timeout=240,
+    )
+    assert done.returncode == 0, done.stderr
+    for kind in ("sfl", "cma"):
+        for seed in (0, 1):
+            summary = json.loads((out / f"kind{kind}_seed{seed}" / "summary.json").read_text())
+            assert summary["status"] == "completed" and summary["proposer"] == kind
+            assert summary["safe_learning"]["trials"] == 25
+            assert (out / f"kind{kind}_seed{seed}" / "proposer.pkl").exists()
+    cma = json.loads((out / "kindcma_seed0" / "summary.json").read_text())
+    assert cma["decisions"] == 25  # one decision per trial without the gate
+    page = (out / "report" / "README.md").read_text()
+    assert "| kind=sfl | 2 |" in page and "| kind=cma | 2 |" in page
+    assert "failures, all trials" in page
+
+
 def test_a_killed_run_is_named_and_left_out_of_every_mean_and_the_others_finish(tmp_path):
     out = tmp_path / "study"
     study = subprocess.Popen(

@@ -1,0 +1,141 @@
+"""``sfl run --resume RUN_DIR``: an interrupted learn run goes on by replaying its recorded trials, and ends with
+the records an uninterrupted run would have made."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from .conftest import ROOT, SCENARIOS, poll_until, sfl, sfl_run, trials_recorded
+
+LEARN = SCENARIOS / "analytic_learn.yaml"
+TRIALS = 40
+STOP_AFTER = 15
+
+
+def rows_without_wall(run_dir: Path) -> list[dict]:
+    rows = [json.loads(line) for line in (run_dir / "records.jsonl").read_text().splitlines()]
+    for row in rows:
+        row.pop("wall_ms", None)
+    return rows
+
+
+def start(out: Path, *sets: str) -> subprocess.Popen:
+    """``sfl run`` in a process group of its own (a Ctrl-C reaches it and its modules, as on a terminal)."""
+    settings = [arg for s in sets for arg in ("--set", s)]
+    return subprocess.Popen(
+        [sys.executable, "-m", "sfl_brain.cli", "run", str(LEARN), *settings, "--out", str(out), "--quiet"],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+
+
+def stop_after(out: Path, trials: int, sets: tuple[str, ...], signum: int) -> subprocess.Popen:
+    """Start a run and send ``signum`` to its process group once its records hold ``trials`` trials."""
+    proc = start(out, *sets)
+    poll_until(lambda: trials_recorded(out) >= trials, f"{trials} trials in {out}", 120, proc)
+    os.killpg(proc.pid, signum)
+    proc.communicate(timeout=60)
+    return proc
+
+
+@pytest.mark.parametrize("proposer", ["sfl", "cma"])
+def test_an_interrupted_learn_run_resumes_to_the_records_of_an_uninterrupted_one(tmp_path, proposer):
+    sets = (f"protocol.trials={TRIALS}", f"protocol.proposer.kind={proposer}")
+    whole = tmp_path / "whole"
+    assert sfl_run(LEARN, whole, *sets).returncode == 0
+
+    resumed = tmp_path / "resumed"
+    proc = stop_after(resumed, STOP_AFTER, sets, signal.SIGINT)
+    assert proc.returncode == 130
+    stopped_at = json.loads((resumed / "summary.json").read_text())
+    assert stopped_at["status"] == "interrupted"
+    assert STOP_AFTER <= stopped_at["trials"] < TRIALS, "the run ended before it could be interrupted"
+
+    done = sfl("run", "--resume", str(resumed), "--quiet")
+    assert done.returncode == 0, done.stderr
+    assert rows_without_wall(resumed) == rows_without_wall(whole)
+    summary = json.loads((resumed / "summary.json").read_text())
+    assert summary["status"] == "completed"
+    assert summary["trials"] == TRIALS
+    assert summary["resumed_from_trial"] == stopped_at["trials"]
+    assert summary["run_id"] == stopped_at["run_id"]  # one recording id: the parts merge
+    assert summary["previous_recordings"] == ["recording.part1.rrd"]
+    assert (resumed / "recording.part1.rrd").exists() and (resumed / "recording.rrd").exists()
+    first = json.loads((whole / "summary.json").read_text())
+    for key in ("successes", "decisions", "no_go", "best", "safe_learning", "acc"):
+        assert summary[key] == first[key], key
+
+
+def test_a_run_killed_with_sigkill_resumes_from_its_whole_rows(tmp_path):
+    """No summary, a torn last line, unmerged recording parts: the resumed run still ends as the whole run."""
+    sets = (f"protocol.trials={TRIALS}",)
+    whole = tmp_path / "whole"
+    assert sfl_run(LEARN, whole, *sets).returncode == 0
+    killed = tmp_path / "killed"
+    stop_after(killed, STOP_AFTER, sets, signal.SIGKILL)
+    assert not (killed / "summary.json").exists()
+    with open(killed / "records.jsonl", "a") as f:
+        f.write('{"kind":"decision","decis')  # the row in flight when the run was killed
+
+    done = sfl("run", "--resume", str(killed), "--quiet")
+    assert done.returncode == 0, done.stderr
+    assert rows_without_wall(killed) == rows_without_wall(whole)
+    summary = json.loads((killed / "summary.json").read_text())
+    assert summary["status"] == "completed" and summary["trials"] == TRIALS
+    assert not (killed / "rerun").exists(), "the killed run's parts were merged into recording.part1.rrd"
+    assert summary["previous_recordings"] == ["recording.part1.rrd"]
+
+
+def test_resuming_a_completed_run_or_a_sweep_is_bad_input_in_one_line(tmp_path):
+    learnt = tmp_path / "learnt"
+    assert sfl_run(LEARN, learnt, "protocol.trials=5").returncode == 0
+    before = (learnt / "records.jsonl").read_bytes()
+    done = sfl("run", "--resume", str(learnt), "--quiet")
+    assert done.returncode == 2
+    assert (
+        done.stderr.strip()
+        == f"sfl: --resume {learnt}: the run is completed, nothing to resume (only an unfinished learn run)"
+    )
+    assert (learnt / "records.jsonl").read_bytes() == before
+
+    swept = tmp_path / "swept"
+    assert sfl_run(SCENARIOS / "analytic_sweep.yaml", swept).returncode == 0
+    (swept / "summary.json").unlink()  # even unfinished: a sweep is run again, not resumed
+    done = sfl("run", "--resume", str(swept), "--quiet")
+    assert done.returncode == 2
+    assert "only a learn run can be resumed" in done.stderr and len(done.stderr.strip().splitlines()) == 1
+
+    done = sfl("run", "--resume", str(tmp_path), "--quiet")
+    assert done.returncode == 2
+    assert done.stderr.strip() == f"sfl: --resume {tmp_path} is not a run folder (no scenario.yaml and records.jsonl)"
+
+    done = sfl("run", str(LEARN), "--resume", str(learnt), "--quiet")
+    assert done.returncode == 2
+    assert done.stderr.strip() == "sfl: --resume runs the folder's own scenario.yaml; drop SCENARIO"
+
+
+def test_a_replay_that_diverges_from_the_records_fails_naming_the_trial(tmp_path):
+    run_dir = tmp_path / "run"
+    assert sfl_run(LEARN, run_dir, "protocol.trials=10").returncode == 0
+    (run_dir / "summary.json").unlink()  # as after a kill -9
+    rows = [json.loads(line) for line in (run_dir / "records.jsonl").read_text().splitlines()]
+    tampered = next(r for r in rows if r["kind"] == "trial" and r["trial"] == 3)
+    tampered["v_unit"] = [0.5, 0.5]
+    (run_dir / "records.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+
+    done = sfl("run", "--resume", str(run_dir), "--quiet")
+    assert done.returncode == 1
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["status"] == "failed"
+    assert summary["stop_reason"].startswith("cannot resume: the replay diverged at trial 3: the proposer asked")
+    assert summary["trials"] == 10, "the records are kept as they were"
