@@ -270,13 +270,23 @@ def test_a_killed_run_is_named_and_left_out_of_every_mean_and_the_others_finish(
 
 
 def test_bad_study_options_exit_2_in_one_line_before_anything_runs(tmp_path):
+    from click.testing import CliRunner
+
+    from sfl_brain.cli import main
+
     out = tmp_path / "study"
-    done = sfl("study", str(LEARN), "--vary", "modules.vigilance.params.value=0", "--out", str(out), "--jobs", "0")
-    assert done.returncode == 2 and done.stderr == "sfl: --jobs 0: expected 1 or more runs at once\n"
-    done = sfl("study", str(LEARN), "--vary", "a.b=1,1", "--out", str(out))
-    assert done.returncode == 2 and done.stderr == "sfl: --vary a.b: 1 given twice\n"
-    done = sfl("study", str(LEARN), "--out", str(out), "--jobs", "2", "--cluster", "tcp://127.0.0.1:9")
-    assert done.returncode == 2 and done.stderr.startswith("sfl: --jobs and --cluster: choose one")
+
+    def study(*args: str):
+        return CliRunner().invoke(main, ["study", str(LEARN), "--out", str(out), *args])
+
+    done = study("--vary", "modules.vigilance.params.value=0", "--jobs", "0")
+    assert done.exit_code == 2 and done.stderr == "sfl: --jobs 0: expected 1 or more runs at once\n"
+    done = study("--vary", "a.b=1,1")
+    assert done.exit_code == 2 and done.stderr == "sfl: --vary a.b: 1 given twice\n"
+    done = study("--jobs", "2", "--cluster", "tcp://127.0.0.1:9")
+    assert done.exit_code == 2 and done.stderr.startswith("sfl: --jobs and --cluster: choose one")
+    done = study("--window", "0")
+    assert done.exit_code == 2 and done.stderr == "sfl: --window 0: expected more than 0\n"
     assert not out.exists()
 
 
