@@ -359,9 +359,10 @@ def start_sfl_run(command: list, run_dir: Path) -> subprocess.Popen:
 
 def interrupt(procs: Iterable[subprocess.Popen], grace: float = STOP_GRACE) -> None:
     """Stop child ``sfl run`` processes as Ctrl-C stops one (SIGINT: it stops its modules and writes its summary);
-    after ``grace`` s, or at a second Ctrl-C, the second SIGINT (its modules killed at once), then SIGKILL."""
+    after ``grace`` s, or at a second Ctrl-C, the second SIGINT (its modules killed at once; it still writes its
+    summary, given ``grace`` s more), then SIGKILL."""
     procs = [p for p in procs if p.poll() is None]
-    for step, wait in ((signal.SIGINT, grace), (signal.SIGINT, 5.0), (signal.SIGKILL, 5.0)):
+    for step, wait in ((signal.SIGINT, grace), (signal.SIGINT, grace), (signal.SIGKILL, 5.0)):
         for proc in procs:
             with contextlib.suppress(ProcessLookupError):
                 proc.send_signal(step)
