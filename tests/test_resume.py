@@ -107,8 +107,19 @@ def test_a_run_killed_with_sigkill_resumes_from_its_whole_rows(tmp_path):
 
 
 def test_resuming_a_completed_run_or_a_sweep_is_bad_input_in_one_line(tmp_path):
-    learnt = tmp_path / "learnt"
-    assert sfl_run(LEARN, learnt, "protocol.trials=5").returncode == 0
+    """What --resume refuses, on folders laid out as runs leave them (what is refused is read before anything
+    starts: the folder's scenario.yaml, records.jsonl and summary.json)."""
+
+    def folder(name: str, scenario: Path, status: str | None) -> Path:
+        run_dir = tmp_path / name
+        run_dir.mkdir()
+        (run_dir / "scenario.yaml").write_text(scenario.read_text())
+        (run_dir / "records.jsonl").write_text('{"kind":"trial","trial":0}\n')
+        if status:
+            (run_dir / "summary.json").write_text(json.dumps({"status": status}))
+        return run_dir
+
+    learnt = folder("learnt", LEARN, "completed")
     before = (learnt / "records.jsonl").read_bytes()
     done = sfl("run", "--resume", str(learnt), "--quiet")
     assert done.returncode == 2
@@ -118,9 +129,7 @@ def test_resuming_a_completed_run_or_a_sweep_is_bad_input_in_one_line(tmp_path):
     )
     assert (learnt / "records.jsonl").read_bytes() == before
 
-    swept = tmp_path / "swept"
-    assert sfl_run(SCENARIOS / "analytic_sweep.yaml", swept).returncode == 0
-    (swept / "summary.json").unlink()  # even unfinished: a sweep is run again, not resumed
+    swept = folder("swept", SCENARIOS / "analytic_sweep.yaml", None)  # even unfinished: a sweep is run again
     done = sfl("run", "--resume", str(swept), "--quiet")
     assert done.returncode == 2
     assert "only a learn run can be resumed" in done.stderr and len(done.stderr.strip().splitlines()) == 1
