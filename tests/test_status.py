@@ -107,6 +107,8 @@ def test_study_marks_a_stalled_run_and_leaves_it_out_of_the_means(tmp_path):
         "--out",
         str(out),
         "--quiet",
+        "--jobs",
+        "2",
     )
     assert done.returncode == 3, done.stderr
     assert "1 of 2 runs stalled, marked in the report and left out of its means: value1.5" in done.stderr
