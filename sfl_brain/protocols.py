@@ -24,7 +24,7 @@ import numpy as np
 from . import messages as m
 from .events import DecisionsMade, Events, Progress, ProgressUpdated, TrialInterrupted, TrialRecorded
 from .metrics import safe_learning
-from .proposers import PROPOSERS, Outcome, Proposer, SuccessFailure
+from .proposers import PROPOSERS, Outcome, Proposer
 from .records import decision_row, plain, point_fields, trial_row
 from .scenario import Plan
 from .service import Interrupted, ModuleService, RunError
@@ -199,19 +199,7 @@ class Gate:
 def make_proposer(c: Conductor) -> Proposer:
     """The scenario's ``protocol.proposer``, seeded from the run's seed."""
     proto = c.plan.scenario.protocol
-    spec = proto.proposer
-    cls = PROPOSERS[spec.kind]
-    if cls is SuccessFailure:
-        return SuccessFailure(
-            spec,
-            c.plan.dim,
-            c.plan.scenario.seed,
-            planned=proto.trials,
-            batch=proto.batch,
-            max_decisions=proto.max_decisions,
-            stall_decisions=proto.stall_decisions,
-        )
-    return cls(spec, c.plan.dim, c.plan.scenario.seed)
+    return PROPOSERS[proto.proposer.kind].for_protocol(proto, c.plan.dim, c.plan.scenario.seed)
 
 
 #: the proposer's checkpoint in the run folder, written after every trial

@@ -334,6 +334,7 @@ class RerunLog:
         axes: list[str],
         trial_seconds: float | None = None,
         layout: dict | None = None,
+        first_trial: int = 0,
     ) -> None:
         self.rec = rr.RecordingStream("sfl-brain", recording_id=run_id)
         attach_sinks(self.rec, rrd, viewer)
@@ -344,7 +345,7 @@ class RerunLog:
         self.trial_seconds = trial_seconds
         self._decisions: list[dict] = []
         self._trials: list[dict] = []
-        self._next_trial = 0  # the trial the next no-go decision is drawn for
+        self._next_trial = first_trial  # the trial the next no-go decision is drawn for (a resumed run: after its own)
         self._flushed = time.monotonic()
         self.live = bool(viewer)
         self.broken = False  # the sink failed: stop sending, say so once

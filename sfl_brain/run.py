@@ -423,9 +423,8 @@ def run(
         [a.name for a in plan.scenario.space],
         plan.trial_seconds,
         layout_of(plan),
+        first_trial=len(resume.trials) if resume is not None else 0,
     )
-    if resume is not None:
-        rr_log._next_trial = len(resume.trials)  # the trial the resumed run's first no-go decisions are drawn for
     record_to(events, writer, decisions=plan.scenario.record.decisions)
     events.subscribe(DecisionsMade, lambda e: rr_log.decisions(e.rows))
     events.subscribe(TrialRecorded, lambda e: rr_log.trial(e.row))

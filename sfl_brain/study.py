@@ -448,31 +448,26 @@ class LocalRunner:
             if child.counter.poll():
                 yield RunProgress(child.run.name, child.counter.trials, child.counter.successes)
         for child in ended:
-            del self.children[child.run.name]
-            child.counter.poll()
-            outcome = finished(
-                self.out / child.run.name,
-                child.proc.returncode,
-                child.counter.trials,
-                time.monotonic() - child.started,
-                cores_text(self.slots[child.slot]),
-            )
-            yield RunFinished(child.run.name, outcome)
+            yield self._finished(child)
 
     def stop(self) -> Iterator[StudyEvent]:
         """Interrupt every running run; each ends ``interrupted`` (or as it was ending)."""
         interrupt([c.proc for c in self.children.values()])
         for child in list(self.children.values()):
-            del self.children[child.run.name]
-            child.counter.poll()
-            outcome = finished(
-                self.out / child.run.name,
-                child.proc.returncode,
-                child.counter.trials,
-                time.monotonic() - child.started,
-                cores_text(self.slots[child.slot]),
-            )
-            yield RunFinished(child.run.name, outcome)
+            yield self._finished(child)
+
+    def _finished(self, child) -> RunFinished:
+        """A child that has ended, out of the running set, with its outcome as its folder says it."""
+        del self.children[child.run.name]
+        child.counter.poll()
+        outcome = finished(
+            self.out / child.run.name,
+            child.proc.returncode,
+            child.counter.trials,
+            time.monotonic() - child.started,
+            cores_text(self.slots[child.slot]),
+        )
+        return RunFinished(child.run.name, outcome)
 
     def close(self) -> None:
         pass

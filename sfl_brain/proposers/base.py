@@ -81,6 +81,12 @@ class Proposer:
         #: why ``ask`` returned None
         self.stop_reason: str | None = None
 
+    @classmethod
+    def for_protocol(cls, protocol, dim: int, seed: int) -> Proposer:
+        """The proposer of a learn ``protocol`` (its ``proposer`` block; a proposer that needs more of the protocol
+        reads it here)."""
+        return cls(protocol.proposer, dim, seed)
+
     def ask(self, gate: Gate) -> np.ndarray | None:
         raise NotImplementedError
 

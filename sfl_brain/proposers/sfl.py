@@ -57,6 +57,19 @@ class SuccessFailure(Proposer):
         self.last_go = -1  # index of the last go decision
         self.consecutive_nogo = 0
 
+    @classmethod
+    def for_protocol(cls, protocol, dim: int, seed: int) -> SuccessFailure:
+        """The protocol's batch and stall limits are this proposer's."""
+        return cls(
+            protocol.proposer,
+            dim,
+            seed,
+            planned=protocol.trials,
+            batch=protocol.batch,
+            max_decisions=protocol.max_decisions,
+            stall_decisions=protocol.stall_decisions,
+        )
+
     def ask(self, gate: Gate) -> np.ndarray | None:
         while (why := self.cannot_go_on()) is None:
             if len(self.pool) < self.batch:
