@@ -55,7 +55,8 @@ class HostedPair:
     """A body and its controller, each hosted by ``sfl_brain.host`` in a process of its own, as ``sfl run``
     hosts a body worker and its controller process: placed as ``lockstep.pin_cpus`` ``pin`` places them
     (or ``apart``: a core each, as ``pin_cpus: always`` did before issue 24), their frames and commands
-    on a lockstep link of their own (``link`` "tick") or on the mesh (``link`` "mesh"). ``body`` None:
+    on a lockstep link of their own (``link`` "socket", as ``sfl run`` by default, or "zenoh": a Zenoh
+    lowlatency session, ``lockstep.link: zenoh``) or on the mesh (``link`` "mesh"). ``body`` None:
     only the controller is hosted, and the caller is the body (``tick``: the link's endpoint)."""
 
     def __init__(
@@ -67,7 +68,7 @@ class HostedPair:
         body: str | None = None,
         *,
         pin: str = "auto",
-        link: str = "tick",
+        link: str = "socket",
         folder=None,
         controller_params: dict | None = None,
         body_params: dict | None = None,
@@ -83,7 +84,11 @@ class HostedPair:
             self.placement = Placement("apart", tuple(cpus), cores, "body and controller on a core each")
         else:
             self.placement = place([Pair("body", "controller")], [], usable_cpus(), pin)
-        self.tick = bus.tick_endpoint(folder, run_id) if link == "tick" else None
+        from sfl_brain import ticklink
+
+        self.link = link
+        endpoints = {"socket": ticklink.endpoint, "zenoh": bus.tick_endpoint}
+        self.tick = endpoints[link](folder, run_id) if link in endpoints else None
         spec = controller_spec(run_id, controller, endpoint, self.placement.of("controller"))
         spec.update(params=controller_params or {}, tick={"listen": [self.tick]} if self.tick else None)
         self.procs = [spawn_host(spec)]

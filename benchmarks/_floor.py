@@ -6,6 +6,8 @@ process) sends back after its own work. How the two wait and where they run is a
 between the variants:
 
 * ``pipe``: an OS pipe each way, both blocking in ``read``: the cheapest blocking hand-over there is;
+* ``socket``: a Unix ``SOCK_SEQPACKET`` socket pair, both blocking in ``recv``: the transport of
+  ``lockstep.link: socket`` (``sfl_brain.ticklink``), bare;
 * ``shm``: a shared-memory sequence number each way, both spinning: no wake-up at all, but each
   side holds a core (on a shared core, or beside a busy process, it starves the other); the
   controller spins only while the body runs ticks, and sleeps in between (it must not be a busy
@@ -139,14 +141,37 @@ PONG_ZENOH = textwrap.dedent("""
         pub.put(reply)
     s.close()
 """)
+PONG_SOCKET = textwrap.dedent("""
+    import socket
+    sock = socket.socket(fileno=int(sys.argv[2]))  # AF_UNIX, SOCK_SEQPACKET: as sfl_brain.ticklink
+    typed = sys.argv[3] == "typed"
+    reply = b"c" * {command}
+    if typed:  # the framework's codec and the open-loop controller, by hand (no host, no checks)
+        from sfl_brain.messages import ControllerReset, SensorFrame, decoder_for, encode
+        from sfl_brain.modules.controllers.open_loop import OpenLoopController
+        controller = OpenLoopController()
+        controller.handle(ControllerReset(trial_id=0, seed=0, params={{}}, sensors={sensors!r}, commands={commands!r}))
+        decode_frame = decoder_for(SensorFrame)
+    recv, send = sock.recv, sock.send
+    while True:
+        data = recv(65537)
+        if not data or data == b"stop":
+            break
+        work(N)
+        if typed:
+            reply = encode(controller.handle(decode_frame(data[:-8]), checked=True)) + data[-8:]
+        send(reply)
+    sock.close()
+""")
 SENSORS = ("hip_l", "hip_r", "knee_l", "knee_r", "contact_l", "contact_r", "slope", "pitch")
 COMMANDS = ("v_hip_l", "v_hip_r", "v_knee_l", "v_knee_r")
 
 
 class Pair:
     """A body here and its controller in a child process, exchanging one tick at a time over ``kind``
-    (``pipe``, ``shm``, ``zenoh-mesh`` or ``zenoh-tick``; ``zenoh-tick-typed``: with the framework's codec and the
-    open-loop controller by hand, both sides); ``mine`` and ``theirs``: the cores of each
+    (``pipe``, ``socket`` (a Unix ``SOCK_SEQPACKET`` pair, as ``lockstep.link: socket``), ``shm``, ``zenoh-mesh`` or
+    ``zenoh-tick``; ``socket-typed``, ``zenoh-tick-typed``: with the framework's codec and the open-loop controller
+    by hand, both sides); ``mine`` and ``theirs``: the cores of each
     (None: not pinned); the body pins itself only while it runs ticks."""
 
     def __init__(self, kind: str, controller_n: int, mine, theirs, tmp: Path) -> None:
@@ -164,6 +189,18 @@ class Pair:
             )
             os.close(pong_r)
             os.close(pong_w)
+        elif kind.startswith("socket"):
+            import socket
+
+            self.typed = kind.endswith("-typed")
+            self.sock, theirs_sock = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+            source += PONG_SOCKET.format(command=COMMAND, sensors=list(SENSORS), commands=list(COMMANDS))
+            fd = theirs_sock.fileno()
+            typed = "typed" if self.typed else "raw"
+            self.proc = subprocess.Popen(
+                [sys.executable, "-c", source, json.dumps(theirs), str(fd), typed], pass_fds=(fd,)
+            )
+            theirs_sock.close()
         elif kind == "shm":
             import mmap
 
@@ -222,6 +259,17 @@ class Pair:
             read(r, 65536)
         return time.perf_counter() - t
 
+    def _run_socket(self, ticks: int, tick) -> float:
+        send, recv, frame = self.sock.send, self.sock.recv, b"f" * FRAME
+        if self.typed:
+            return self._run_typed(ticks, tick)
+        t = time.perf_counter()
+        for _ in range(ticks):
+            tick()
+            send(frame)
+            recv(65537)
+        return time.perf_counter() - t
+
     def _run_shm(self, ticks: int, tick) -> float:
         buf = self.buf
         seq = self.seq
@@ -260,13 +308,22 @@ class Pair:
 
         from sfl_brain.messages import MotorCommand, SensorFrame, decoder_for, encode
 
-        put, recv, decode_command = self.pub.put, self.sub.recv, decoder_for(MotorCommand)
+        decode_command = decoder_for(MotorCommand)
         values, nonce = np.zeros(len(SENSORS)), bytes(8)
         t = time.perf_counter()
+        if self.kind.startswith("socket"):
+            send, recv = self.sock.send, self.sock.recv
+            for _ in range(ticks):
+                tick()
+                send(encode(SensorFrame(trial_id=0, tick=self.seq, values=values)) + nonce)
+                decode_command(recv(65537)[:-8])
+                self.seq += 1
+            return time.perf_counter() - t
+        put, recv_sample = self.pub.put, self.sub.recv
         for _ in range(ticks):
             tick()
             put(encode(SensorFrame(trial_id=0, tick=self.seq, values=values)) + nonce)
-            decode_command(recv().payload.to_bytes()[:-8])
+            decode_command(recv_sample().payload.to_bytes()[:-8])
             self.seq += 1
         return time.perf_counter() - t
 
@@ -276,6 +333,10 @@ class Pair:
             self.proc.wait(timeout=10)
             os.close(self.r)
             os.close(self.w)
+        elif self.kind.startswith("socket"):
+            self.sock.send(b"stop")
+            self.proc.wait(timeout=10)
+            self.sock.close()
         elif self.kind == "shm":
             os.write(self.go, b"s")
             os.close(self.go)

@@ -15,14 +15,17 @@ median over ``--repeats`` rounds of the variant's time over the one-process time
 (bare Zenoh) pub/sub, both blocking in a ring channel's recv(): on the run's mesh configuration
     (TCP) on two cores and on one core, and on the lockstep link's configuration (lowlatency
     transport, QoS off, a Unix socket; ``bus.tick_config``) on one core;
-(typed by hand) bare Zenoh on the lockstep link with the framework's codec and the open-loop controller
-    written by hand (no host, no BusLink, no checks): what the messages cost, apart from the runtime;
-(framework) the body's ``BusLink`` to an open-loop controller hosted by ``sfl_brain.host``, typed,
-    encoded, checked, dispatched: as ``sfl run`` runs a pair now (both on one core, blocking, on
-    their lockstep link), and as before issue 24 (not pinned, ticks on the mesh, the body polling up
-    to ``--spin-us`` before it sleeps);
-then one process, the framework, bare Zenoh on the link and the spinning pair again beside one busy
-process (a spinning process this benchmark starts, unpinned). Every session runs Zenoh's runtimes
+(socket) a Unix ``SOCK_SEQPACKET`` socket pair, both blocking, on one core: the transport of
+    ``lockstep.link: socket`` (``sfl_brain.ticklink``), bare;
+(typed by hand) bare Zenoh on the lockstep link, and the bare socket, with the framework's codec and the
+    open-loop controller written by hand (no host, no link, no checks): what the messages cost, apart
+    from the runtime;
+(framework) the body's link to an open-loop controller hosted by ``sfl_brain.host``, typed, encoded,
+    checked, dispatched: as ``sfl run`` runs a pair now (both on one core, blocking, ``SocketLink`` on
+    their socket link), with ``lockstep.link: zenoh`` (``BusLink`` on a Zenoh lowlatency session), and
+    as before issue 24 (not pinned, ticks on the mesh, the body polling up to ``--spin-us``);
+then one process, the framework, bare Zenoh on the link, the bare socket and the spinning pair again beside
+one busy process (a spinning process this benchmark starts, unpinned). Every session runs Zenoh's runtimes
 on one thread (``bus.RUNTIME``). Then the ``sfl run`` start-up (five module processes) to the first
 trial (``--no-startup``: skipped).
 """
@@ -45,13 +48,15 @@ from _common import HostedPair, Pinned  # noqa: E402
 
 from sfl_brain import bus  # noqa: E402
 from sfl_brain.body import InProcessLink  # noqa: E402
-from sfl_brain.host import BusLink  # noqa: E402
+from sfl_brain.host import BusLink, SocketLink  # noqa: E402
 from sfl_brain.messages import ControllerReset, SensorFrame  # noqa: E402
 from sfl_brain.modules.controllers.open_loop import OpenLoopController  # noqa: E402
 from sfl_brain.placement import usable_cpus  # noqa: E402
 
 SENSORS = ["hip_l", "hip_r", "knee_l", "knee_r", "contact_l", "contact_r", "slope", "pitch"]
 COMMANDS = ["v_hip_l", "v_hip_r", "v_knee_l", "v_knee_r"]
+#: the framework as ``sfl run`` runs a pair now
+NOW = "framework now: socket link (lockstep.link: socket), one core"
 RESET = ControllerReset(trial_id=0, seed=0, params={}, sensors=SENSORS, commands=COMMANDS)
 
 
@@ -100,9 +105,13 @@ class Framework(_Side):
             folder=folder,
         )
         self.mine = self.pair.placement.of("body")
-        self.ticks = bus.open_tick_session([], [self.pair.tick]) if self.pair.tick else None
-        # a body pinned with its controller never polls (it may use one core only)
-        self.link = BusLink(session, run_id, "body", "controller", 10.0, 0.0 if self.mine else spin, ticks=self.ticks)
+        spin = 0.0 if self.mine else spin  # a body pinned with its controller never polls (it may use one core only)
+        self.ticks = None
+        if link == "socket":
+            self.link = SocketLink(session, run_id, "body", "controller", 10.0, spin, endpoint=self.pair.tick)
+        else:
+            self.ticks = bus.open_tick_session([], [self.pair.tick]) if self.pair.tick else None
+            self.link = BusLink(session, run_id, "body", "controller", 10.0, spin, ticks=self.ticks)
         self.link.reset(RESET)
         self.values = np.zeros(len(SENSORS))
         self.tick = 0
@@ -187,9 +196,12 @@ def main() -> None:
         sides["bare Zenoh, mesh (tcp), both block, one core"] = _floor.Pair("zenoh-mesh", 0, one, one, tmp)
         sides["bare Zenoh, lockstep link, both block, one core"] = _floor.Pair("zenoh-tick", 0, one, one, tmp)
         sides["  + typed messages and controller, by hand"] = _floor.Pair("zenoh-tick-typed", 0, one, one, tmp)
-        sides["framework: lockstep link, both block, one core"] = Framework(
-            session, endpoint, "benchnow", folder, "auto", "tick", spin
+        sides["framework, Zenoh lockstep link (lockstep.link: zenoh), one core"] = Framework(
+            session, endpoint, "benchzenoh", folder, "auto", "zenoh", spin
         )
+        sides["socket (SOCK_SEQPACKET), both block, one core"] = _floor.Pair("socket", 0, one, one, tmp)
+        sides["  + typed messages and controller, by hand "] = _floor.Pair("socket-typed", 0, one, one, tmp)
+        sides[NOW] = Framework(session, endpoint, "benchnow", folder, "auto", "socket", spin)
         for side in sides.values():
             side.run(200, tick)  # warm up
         ratios = rounds(sides, "one process", args.repeats, args.ticks, args.block, tick)
@@ -198,7 +210,8 @@ def main() -> None:
             "one process",
             "shared memory, both spin, not pinned",
             "bare Zenoh, lockstep link, both block, one core",
-            "framework: lockstep link, both block, one core",
+            "socket (SOCK_SEQPACKET), both block, one core",
+            NOW,
         ]
         neighbour = _floor.Busy()
         try:
@@ -224,15 +237,26 @@ def main() -> None:
     for name, r in ratios.items():
         q1, q3 = np.percentile(r, [25, 75])
         print(f"  {name:<{width}}  {np.median(r):5.2f}  (IQR {q1:.2f}-{q3:.2f})")
-    raw = np.median(ratios["bare Zenoh, lockstep link, both block, one core"])
-    typed = np.median(ratios["  + typed messages and controller, by hand"])
-    framework = np.median(ratios["framework: lockstep link, both block, one core"])
-    added = (framework - raw) * reference * 1e6
-    print(
-        f"  framework / bare Zenoh in the same configuration (lockstep link, one core): {framework / raw:.2f} "
-        f"(goal <= 1.10); the framework adds {added:.1f} us per tick, of which the typed messages and the "
-        f"controller's step by hand {(typed - raw) * reference * 1e6:.1f} us"
-    )
+    for label, raw_name, typed_name, framework_name in (
+        (
+            "framework / bare socket in the same configuration (socket link, one core)",
+            "socket (SOCK_SEQPACKET), both block, one core",
+            "  + typed messages and controller, by hand ",
+            NOW,
+        ),
+        (
+            "framework / bare Zenoh in the same configuration (Zenoh lockstep link, one core)",
+            "bare Zenoh, lockstep link, both block, one core",
+            "  + typed messages and controller, by hand",
+            "framework, Zenoh lockstep link (lockstep.link: zenoh), one core",
+        ),
+    ):
+        raw, typed, framework = (np.median(ratios[n]) for n in (raw_name, typed_name, framework_name))
+        print(
+            f"  {label}: {framework / raw:.2f} (goal <= 1.10); the framework adds "
+            f"{(framework - raw) * reference * 1e6:.1f} us per tick, of which the typed messages and the "
+            f"controller's step by hand {(typed - raw) * reference * 1e6:.1f} us"
+        )
     print(f"beside one busy process: medians of {args.busy_repeats} rounds; {beside}")
     for name, r in busy.items():
         q1, q3 = np.percentile(r, [25, 75])

@@ -15,10 +15,11 @@ the rounds, ratios medians of the ratios within each round; the load average is 
     so that all meet the same neighbours on a busy machine;
 (c) the same trial with controller and body each hosted in its own process by ``sfl_brain.host``, as ``sfl run`` hosts
     them: placed as ``lockstep.pin_cpus`` ``--pin`` says (default ``auto``: both on one core, blocking), their frames
-    and commands on their lockstep link (Zenoh's lowlatency transport); the trial is a request from this process,
+    and commands on their socket link (``lockstep.link: socket``); the trial is a request from this process,
     timed from request to reply;
+(c-zenoh) placed as (c), the ticks on a Zenoh lowlatency session (``lockstep.link: zenoh``): what the socket gives;
 (c-free) not pinned, the body polling up to ``--spin-us`` (``lockstep.spin_us``, default the scenario's 400 us) for
-    each command, on the lockstep link: what the placement alone gives;
+    each command, on the Zenoh link: what the placement alone gives;
 (c-mesh) placed as (c), but the ticks on the run's mesh: what the link alone gives;
 (c-before) not pinned, polling, on the mesh: as before issue 24.
 Every trial over processes is checked bit for bit against the one-process trial once.
@@ -149,8 +150,9 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     times: dict[str, list[float]] = {}
     pairs: dict[str, Processes] = {}
     variants = {
-        "c": {"pin": args.pin, "link": "tick", "spin": spin},
-        "c-free": {"pin": "never", "link": "tick", "spin": spin},
+        "c": {"pin": args.pin, "link": "socket", "spin": spin},
+        "c-zenoh": {"pin": args.pin, "link": "zenoh", "spin": spin},
+        "c-free": {"pin": "never", "link": "zenoh", "spin": spin},
         "c-mesh": {"pin": args.pin, "link": "mesh", "spin": spin},
         "c-before": {"pin": "never", "link": "mesh", "spin": spin},
     }
@@ -205,7 +207,8 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     print(f"  (b)/(c) = {ratio('b', 'c'):.2f} of the one-process speed over processes (goal >= 0.8)")
     print(f"  (b)/(a) = {ratio('b', 'a'):.2f}   (c)/(b) = {ratio('c', 'b'):.2f}   (c)/(a) = {ratio('c', 'a'):.2f}")
     for name, label in (
-        ("c-free", f"not pinned, the body polling {args.spin_us:g} us, lockstep link"),
+        ("c-zenoh", "placed as (c), ticks on a Zenoh lowlatency link (lockstep.link: zenoh)"),
+        ("c-free", f"not pinned, the body polling {args.spin_us:g} us, Zenoh link"),
         ("c-mesh", "placed as (c), ticks on the mesh"),
         ("c-before", f"not pinned, the body polling {args.spin_us:g} us, ticks on the mesh (before issue 24)"),
     ):

@@ -13,19 +13,21 @@ median of the ratios within each round. The load average is printed.
     with the same metrics bit for bit (checked on every repeat);
 (c) controller and body each hosted in its own process by ``sfl_brain.host``, as ``sfl run`` hosts
     them: placed as ``lockstep.pin_cpus`` ``--pin`` says (default ``auto``: both on one core), their
-    frames and commands on their lockstep link (Zenoh's lowlatency transport); the trial is a request
+    frames and commands on their socket link (``lockstep.link: socket``); the trial is a request
     from this process, timed from request to reply;
-(c-free) the same pair not pinned (``pin_cpus: never``), the body polling up to ``--spin-us`` for
-    each command (``lockstep.spin_us``): the placement before issue 24;
+(c-zenoh) the pair placed as (c), its ticks on a Zenoh lowlatency session (``lockstep.link: zenoh``);
+(c-free) the pair not pinned (``pin_cpus: never``), the body polling up to ``--spin-us`` for
+    each command (``lockstep.spin_us``), on the Zenoh link: the placement before issue 24;
 (c-mesh) the pair placed as (c), but its frames and commands on the run's mesh;
 (c-apart) the pair on a core each (as ``pin_cpus: always`` placed it before issue 24), the body
-    polling, on its lockstep link;
+    polling, on the Zenoh link;
 then the floors of a lockstep pair whose body steps (a)'s physics each tick and whose controller answers at
-once (``_floor.py``), against (a): a pipe, both on the pair's core; shared memory, both spinning, not pinned;
-bare Zenoh on the lockstep link's configuration, both on the pair's core: the framework's baseline
-(framework / bare Zenoh = ((c)/(b)) / (bare Zenoh/(a)));
-then (a), (b), (c), bare Zenoh and the spinning pair again beside one busy process (a process this
-benchmark starts, spinning, unpinned);
+once (``_floor.py``), against (a): a pipe and a bare ``SOCK_SEQPACKET`` socket, both on the pair's core;
+shared memory, both spinning, not pinned; bare Zenoh on the lockstep link's configuration, both on the
+pair's core: each link's baseline (framework / bare transport = ((c)/(b)) / (socket/(a)), and the same
+of (c-zenoh) over bare Zenoh);
+then (a), (b), (c), (c-zenoh), the bare socket, bare Zenoh and the spinning pair again beside one busy
+process (a process this benchmark starts, spinning, unpinned);
 then a sweep of a grid x grid subset of the E3.1 grid with 1 and with 2 body workers, with the
 controllers colocated in the body workers and as separate processes (``--no-sweep``: skipped).
 """
@@ -155,14 +157,18 @@ def main() -> None:
     floors: dict[str, _floor.Pair] = {}
     try:
         hosted["c"] = Processes(session, endpoint, "benchplanar", folder, pin=args.pin, spin=spin)
-        hosted["c-free"] = Processes(session, endpoint, "benchplanarfree", folder, pin="never", spin=spin)
+        hosted["c-zenoh"] = Processes(session, endpoint, "benchplanarzenoh", folder, pin=args.pin, link="zenoh")
+        hosted["c-free"] = Processes(session, endpoint, "benchplanarfree", folder, pin="never", link="zenoh", spin=spin)
         hosted["c-mesh"] = Processes(session, endpoint, "benchplanarmesh", folder, pin=args.pin, link="mesh", spin=spin)
-        hosted["c-apart"] = Processes(session, endpoint, "benchplanarapart", folder, pin="apart", spin=spin)
+        hosted["c-apart"] = Processes(
+            session, endpoint, "benchplanarapart", folder, pin="apart", link="zenoh", spin=spin
+        )
         for pair in hosted.values():
             pair.trial()  # warm up
         # the floors: the body steps the walker's physics each tick, as (a), and the controller answers at once
         core = hosted["c"].placement.of("body")  # the pair's core (None: not pinned)
         floors["pipe"] = _floor.Pair("pipe", 0, core, core, Path(folder))
+        floors["socket"] = _floor.Pair("socket", 0, core, core, Path(folder))
         floors["shm"] = _floor.Pair("shm", 0, None, None, Path(folder))
         floors["zenoh"] = _floor.Pair("zenoh-tick", 0, core, core, Path(folder))
         for pair in floors.values():
@@ -189,7 +195,7 @@ def main() -> None:
                     continue
                 into.setdefault(name, []).append(t)
 
-        everything = ["a", "b", "b0", "c", "c-free", "c-mesh", "c-apart", "pipe", "shm", "zenoh"]
+        everything = ["a", "b", "b0", "c", "c-zenoh", "c-free", "c-mesh", "c-apart", "pipe", "socket", "shm", "zenoh"]
         shuffle = np.random.default_rng(0).shuffle
         for _ in range(args.repeats):  # interleaved, so that all see the same machine load, in a shuffled order
             shuffle(everything)
@@ -197,7 +203,7 @@ def main() -> None:
         during = _floor.machine_load()
         neighbour = _floor.Busy()
         try:
-            besides = ["a", "b", "c", "zenoh", "shm"]
+            besides = ["a", "b", "c", "c-zenoh", "socket", "zenoh", "shm"]
             for _ in range(args.busy_repeats):
                 shuffle(besides)
                 round_(busy, besides)
@@ -225,23 +231,32 @@ def main() -> None:
     print(f"  (b) controller + body, one process  {b * 1e3:7.1f} ms  ({10 / b:5.1f}x real time)")
     print(f"  (b0) the same, the body as before batching  {b0 * 1e3:7.1f} ms  (identical metrics)")
     print(f"  (b0)/(b) = {ratio('b0', 'b'):.2f} (goal >= 1.6)   (b)/(a) = {ratio('b', 'a'):.2f} (goal <= 1.1)")
-    print(f"  (c) controller + body over processes, lockstep link  {c * 1e3:7.1f} ms  ({10 / c:5.1f}x real time)")
+    print(f"  (c) controller + body over processes, socket link  {c * 1e3:7.1f} ms  ({10 / c:5.1f}x real time)")
     print(f"  (c)/(b) = {ratio('c', 'b'):.2f} (goal <= 1.45)")
-    print(f"  (c-free) not pinned, the body polling {args.spin_us:g} us: (c-free)/(b) = {ratio('c-free', 'b'):.2f}")
+    print(f"  (c-zenoh) placed as (c), ticks on a Zenoh lowlatency link: (c-zenoh)/(b) = {ratio('c-zenoh', 'b'):.2f}")
+    print(
+        f"  (c-free) not pinned, the body polling {args.spin_us:g} us, Zenoh link: (c-free)/(b) = "
+        f"{ratio('c-free', 'b'):.2f}"
+    )
     print(f"  (c-mesh) placed as (c), ticks on the mesh: (c-mesh)/(b) = {ratio('c-mesh', 'b'):.2f}")
     print(
-        f"  (c-apart) a core each, the body polling {args.spin_us:g} us, lockstep link: "
+        f"  (c-apart) a core each, the body polling {args.spin_us:g} us, Zenoh link: "
         f"(c-apart)/(b) = {ratio('c-apart', 'b'):.2f}"
     )
     print("  floors: the body steps (a)'s physics each tick, the controller answers at once; against (a):")
     where = f"core {core[0]}" if core else "not pinned"
     print(f"    pipe, both blocking, both on {where}: {ratio('pipe', 'a'):.2f}")
+    print(f"    socket (SOCK_SEQPACKET), both blocking, both on {where}: {ratio('socket', 'a'):.2f}")
     print(f"    shared memory, both spinning, not pinned: {ratio('shm', 'a'):.2f}")
     print(f"    bare Zenoh, lockstep link, both blocking on {where}: {ratio('zenoh', 'a'):.2f}")
-    framework_over_raw = ratio("c", "b") / ratio("zenoh", "a")
-    print(f"  framework / bare Zenoh in the same configuration: {framework_over_raw:.2f} (goal <= 1.10)")
+    print(
+        "  framework / its bare transport in the same configuration: socket link ((c)/(b)) / (socket/(a)) "
+        f"{ratio('c', 'b') / ratio('socket', 'a'):.2f}; Zenoh link ((c-zenoh)/(b)) / (bare Zenoh/(a)) "
+        f"{ratio('c-zenoh', 'b') / ratio('zenoh', 'a'):.2f} (goal <= 1.10)"
+    )
     print(f"beside one busy process, {args.busy_repeats} rounds ({beside}):")
-    print(f"  (c)/(b) = {ratio('c', 'b', busy):.2f} (goal <= 1.6)")
+    print(f"  (c)/(b) = {ratio('c', 'b', busy):.2f} (goal <= 1.6); (c-zenoh)/(b) = {ratio('c-zenoh', 'b', busy):.2f}")
+    print(f"    socket, both blocking on {where}: {ratio('socket', 'a', busy):.2f}")
     print(f"    shared memory, both spinning, not pinned: {ratio('shm', 'a', busy):.2f}")
     print(f"    bare Zenoh, lockstep link, both blocking on {where}: {ratio('zenoh', 'a', busy):.2f}")
     print(f"500 walking trials at (c): <= {500 * c:.0f} s (goal: E3.2 under 240 s; falls end trials early)")

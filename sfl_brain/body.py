@@ -5,7 +5,7 @@ takes one control tick of commands, and says when the trial is over and how it
 went. A :class:`Controller` turns one tick of sensor values into one tick of
 commands. :meth:`Body.trial` runs them in lockstep through a *link*: the
 controller itself in the same process (:class:`InProcessLink`), or the same
-controller in another process over Zenoh (``sfl_brain.host.BusLink``). The loop
+controller in another process (``sfl_brain.host.SocketLink`` or ``BusLink``). The loop
 is the same either way, so both give identical trial records.
 
 NaN or an infinity in a tick's sensor values, in a controller's command or in a
@@ -199,7 +199,7 @@ class Body(Module):
     def _controller_name(self) -> str:
         """How errors name the controller behind ``self.link``."""
         controller = getattr(self.link, "controller", None)
-        if isinstance(controller, str):  # a BusLink: the controller's instance name
+        if isinstance(controller, str):  # a SocketLink or BusLink: the controller's instance name
             return f"controller {controller!r}"
         if controller is not None:
             return f"{type(controller).__name__} {controller.entity!r}"

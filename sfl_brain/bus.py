@@ -11,8 +11,9 @@ user passes other endpoints; peers find each other by gossip through the first
 endpoint, so the mesh is direct between every pair of processes.
 
 A body worker and its controller process exchange their per-tick frames and commands on a link of
-their own (:func:`open_tick_session`: Zenoh's lowlatency transport over a Unix socket), apart from
-the mesh.
+their own, apart from the mesh: a Unix socket (:mod:`sfl_brain.ticklink`, ``lockstep.link: socket``,
+the default), or :func:`open_tick_session` (Zenoh's lowlatency transport over a Unix socket,
+``lockstep.link: zenoh``).
 
 A run has a secret (:class:`Seal`): requests and replies carry a keyed MAC, liveliness tokens
 a proof, and lockstep frames the current trial's nonce (see ``docs/wire.md``); what lacks them is

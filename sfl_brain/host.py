@@ -9,8 +9,9 @@ The host opens a Zenoh peer session, answers each request type the module
 handles on ``sfl/<run>/<instance>/<tag>``, publishes replies to stream messages
 (lockstep ticks) to the instance named in its routes, and declares a liveliness
 token once it is ready. A body worker and its controller process also open their
-lockstep link (``spec["tick"]``, :func:`bus.open_tick_session`), which carries their
-frames and commands; a host whose spec names cores (``spec["cpus"]``, from
+lockstep link (``spec["tick"]``: a ``seqpacket/`` endpoint is a socket link, :mod:`sfl_brain.ticklink`,
+:class:`SocketLink`; a ``unixsock-stream/`` one a Zenoh session, :func:`bus.open_tick_session`,
+:class:`BusLink`), which carries their frames and commands; a host whose spec names cores (``spec["cpus"]``, from
 :mod:`sfl_brain.placement`) pins itself to them before any session starts.
 Requests are handed to one loop in the main thread (a trial may run for seconds);
 lockstep stream messages are answered by a thread that blocks in the subscriber's
@@ -25,6 +26,7 @@ its parent goes away (stdin closes).
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 import os
@@ -40,7 +42,7 @@ from typing import Any
 
 import zenoh
 
-from . import bus
+from . import bus, ticklink
 from .body import Body, InProcessLink
 from .messages import (
     ControllerReset,
@@ -114,7 +116,88 @@ class SpinThenSleep:
         return self.spin
 
 
-class BusLink:
+def check_command(data: bytes, frame: SensorFrame, nonce: bytes, drops: bus.Drops) -> MotorCommand | None:
+    """The command in ``data`` if it answers ``frame``: this trial's stream ``nonce`` at its end, a
+    :class:`MotorCommand` of the frame's trial and tick; None (dropped and counted) if not."""
+    if data[-8:] != nonce:
+        drops("foreign", "command", "not this trial's stream nonce")
+        return None
+    try:
+        command = _decode_command(data[:-8])
+    except MessageError as exc:
+        drops("malformed", "command", str(exc))
+        return None
+    if type(command) is not MotorCommand:
+        drops("malformed", "command", f"a {getattr(command, 'TAG', command)} on the command key")
+        return None
+    if command.trial_id != frame.trial_id or command.tick != frame.tick:
+        drops("stale", "command", f"trial {command.trial_id} tick {command.tick} while waiting for tick {frame.tick}")
+        return None
+    return command
+
+
+class TickLink:
+    """What a body's link to its controller in another process does on either transport (:class:`SocketLink`,
+    :class:`BusLink`): the reset, a signed request on the mesh whose nonce becomes the trial's stream nonce;
+    a watchdog that ends a tick whose command is overdue after ``timeout`` seconds (a hung controller);
+    :meth:`interrupt` when the host stops. A body that may use one core only (a 1-core machine, or sharing
+    its core with its controller, ``lockstep.pin_cpus``) never polls: polling needs a core for the
+    controller to answer on, or it starves the controller it waits for."""
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        run_id: str,
+        body: str,
+        controller: str,
+        timeout: float,
+        spin: float,
+        secret: str | None,
+        drops: bus.Drops | None,
+    ) -> None:
+        self.session = session
+        self.run_id = run_id
+        self.controller = controller
+        self.timeout = timeout
+        self.seal = bus.Seal(secret)
+        self.drops = drops or bus.Drops(log, body)
+        self.waiter = SpinThenSleep(spin if len(usable_cpus()) > 1 else 0.0)
+        self.reset_key = bus.key(run_id, controller, ControllerReset.TAG)
+        self.nonce = b""  # this trial's stream nonce (set by reset)
+        self._waiting_since: float | None = None
+        self._abort: str | None = None  # why the waiting tick must end (overdue command, stopping)
+        self._stopping = False
+        self._closed = threading.Event()
+
+    def _start_watchdog(self) -> None:
+        threading.Thread(target=self._watch, name="ticklink-watchdog", daemon=True).start()
+
+    def _wake(self, reason: str) -> None:
+        """End the waiting tick with LinkError(reason, ``{tick}`` filled in)."""
+        raise NotImplementedError
+
+    def _watch(self) -> None:
+        period = min(max(self.timeout / 4, 0.01), 1.0)
+        while not self._closed.wait(period):
+            since = self._waiting_since
+            if since is not None and time.perf_counter() - since > self.timeout and self._abort is None:
+                self._wake(f"no command for tick {{tick}} within {self.timeout:g} s")
+
+    def interrupt(self) -> None:
+        """Make a waiting (or the next) tick raise LinkError: the host is stopping."""
+        self._stopping = True
+        self._wake("the body worker is stopping")
+
+    def _send_reset(self, msg: ControllerReset) -> None:
+        """A new trial, a new stream nonce: the reset request that carries it."""
+        self.nonce = os.urandom(bus.Seal.NONCE)
+        try:
+            request(self.session, self.reset_key, msg, self.timeout, seal=self.seal, nonce=self.nonce)
+        except NoReply as exc:  # a late controller interrupts the trial (it is retried); its errors do not
+            raise LinkError(f"controller reset for trial {msg.trial_id}: {exc}") from None
+
+
+class BusLink(TickLink):
     """A body's link to a controller in another process: lockstep pub/sub per tick.
 
     Frames and commands go over ``ticks``, the pair's lockstep link (:func:`bus.open_tick_session`;
@@ -149,18 +232,8 @@ class BusLink:
         drops: bus.Drops | None = None,
         ticks: zenoh.Session | None = None,
     ) -> None:
-        self.session = session
+        super().__init__(session, run_id, body, controller, timeout, spin, secret, drops)
         self.ticks = ticks or session
-        self.timeout = timeout
-        self.run_id = run_id
-        self.controller = controller
-        self.seal = bus.Seal(secret)
-        self.drops = drops or bus.Drops(log, body)
-        # polling needs a core for the controller to answer on while the body polls: a body on
-        # one core (a 1-core machine, or sharing its core with its controller, lockstep.pin_cpus)
-        # sleeps at once, or it would starve the controller it waits for
-        self.waiter = SpinThenSleep(spin if len(usable_cpus()) > 1 else 0.0)
-        self.reset_key = bus.key(run_id, controller, ControllerReset.TAG)
         self.command_key = bus.key(run_id, body, MotorCommand.TAG)
         self.publisher = self.ticks.declare_publisher(bus.key(run_id, controller, SensorFrame.TAG))
         self.subscriber = self.ticks.declare_subscriber(self.command_key, zenoh.handlers.RingChannel(64))
@@ -171,13 +244,7 @@ class BusLink:
         )
         if self.publisher.matching_status.matching:
             self._linked.set()
-        self.nonce = b""  # this trial's stream nonce (set by reset)
-        self._waiting_since: float | None = None
-        self._abort: str | None = None  # why the waiting tick must end (overdue command, stopping)
-        self._stopping = False
-        self._closed = threading.Event()
-        self._watchdog = threading.Thread(target=self._watch, name="buslink-watchdog", daemon=True)
-        self._watchdog.start()
+        self._start_watchdog()
         # the controller's signed liveliness tokens: when the one we saw goes away, it died
         self._controller_tokens: set[str] = set()
         self._liveliness = session.liveliness().declare_subscriber(
@@ -212,29 +279,13 @@ class BusLink:
             except Exception:  # the session is already closing: nothing waits any more
                 pass
 
-    def _watch(self) -> None:
-        period = min(max(self.timeout / 4, 0.01), 1.0)
-        while not self._closed.wait(period):
-            since = self._waiting_since
-            if since is not None and time.perf_counter() - since > self.timeout and self._abort is None:
-                self._wake(f"no command for tick {{tick}} within {self.timeout:g} s")
-
-    def interrupt(self) -> None:
-        """Make a waiting (or the next) tick raise LinkError: the host is stopping."""
-        self._stopping = True
-        self._wake("the body worker is stopping")
-
     def reset(self, msg: ControllerReset) -> None:
         if self._stopping:
             raise LinkError("interrupted: the body worker is stopping")
         while self.subscriber.try_recv() is not None:  # drop stale commands and wake-ups
             pass
         self.waiter.restart()
-        self.nonce = os.urandom(bus.Seal.NONCE)  # a new trial, a new stream nonce
-        try:
-            request(self.session, self.reset_key, msg, self.timeout, seal=self.seal, nonce=self.nonce)
-        except NoReply as exc:  # a late controller interrupts the trial (it is retried); its errors do not
-            raise LinkError(f"controller reset for trial {msg.trial_id}: {exc}") from None
+        self._send_reset(msg)
         if not self._linked.wait(self.timeout):  # a restarted controller's link comes up with its process
             raise LinkError(f"trial {msg.trial_id}: no lockstep link to `{self.controller}` within {self.timeout:g} s")
 
@@ -261,25 +312,9 @@ class BusLink:
                     raise LinkError("interrupted: " + self._abort.format(tick=frame.tick))
                 if not data:
                     continue  # a late wake-up from an earlier tick
-                if data[-8:] != nonce:
-                    self.drops("foreign", "command", "not this trial's stream nonce")
-                    continue
-                try:
-                    command = _decode_command(data[:-8])
-                except MessageError as exc:
-                    self.drops("malformed", "command", str(exc))
-                    continue
-                if type(command) is not MotorCommand:
-                    self.drops("malformed", "command", f"a {getattr(command, 'TAG', command)} on the command key")
-                    continue
-                if command.trial_id != frame.trial_id or command.tick != frame.tick:
-                    self.drops(
-                        "stale",
-                        "command",
-                        f"trial {command.trial_id} tick {command.tick} while waiting for tick {frame.tick}",
-                    )
-                    continue
-                return command
+                command = check_command(data, frame, nonce, self.drops)
+                if command is not None:
+                    return command
         finally:
             self._waiting_since = None
 
@@ -289,6 +324,77 @@ class BusLink:
         self._matching.undeclare()
         self.subscriber.undeclare()
         self.publisher.undeclare()
+
+
+class SocketLink(TickLink):
+    """A body's link to its controller process over their socket lockstep link (:mod:`sfl_brain.ticklink`,
+    ``lockstep.link: socket``, the default where the OS has one): the body's thread sends a frame and
+    blocks in ``recv`` for the command, two system calls and no thread in between.
+
+    As :class:`BusLink`: every frame and command carries the trial's stream nonce, a command must answer
+    the frame's trial and tick, and anything else is dropped and counted. A controller that dies closes
+    its end of the socket, which ends the waiting tick at once (end of file; no liveliness token needed);
+    the watchdog ends an overdue one. Either closes the link, and the next trial connects again (to a
+    restarted controller: within ``timeout``)."""
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        run_id: str,
+        body: str,
+        controller: str,
+        timeout: float,
+        spin: float = 0.0,
+        *,
+        endpoint: str,
+        secret: str | None = None,
+        drops: bus.Drops | None = None,
+    ) -> None:
+        super().__init__(session, run_id, body, controller, timeout, spin, secret, drops)
+        self.channel = ticklink.Channel(endpoint)
+        self._start_watchdog()
+
+    def _wake(self, reason: str) -> None:
+        self._abort = reason
+        self.channel.wake()
+
+    def reset(self, msg: ControllerReset) -> None:
+        if self._stopping:
+            raise LinkError("interrupted: the body worker is stopping")
+        self.waiter.restart()
+        # late commands of an interrupted trial are dropped; a link whose controller went away connects again
+        if not self.channel.drain() and not self.channel.connect(self.timeout, lambda: self._stopping):
+            raise LinkError(f"trial {msg.trial_id}: no lockstep link to `{self.controller}` within {self.timeout:g} s")
+        self._send_reset(msg)
+
+    def step(self, frame: SensorFrame) -> MotorCommand:
+        clock, channel = time.perf_counter, self.channel
+        if not self._stopping:
+            self._abort = None
+        nonce = self.nonce
+        try:
+            channel.send(encode(frame) + nonce)
+            now = self._waiting_since = clock()  # after the send: the controller works meanwhile
+            spin = self.waiter.next_tick(now)
+            while True:
+                data = None
+                if spin:
+                    deadline = now + self.waiter.budget
+                    while (data := channel.try_recv()) is None and clock() < deadline:
+                        pass
+                    spin = False
+                command = check_command(data if data is not None else channel.recv(), frame, nonce, self.drops)
+                if command is not None:
+                    return command
+        except ticklink.LinkClosed:
+            why = self._abort or f"the lockstep link to `{self.controller}` closed at tick {{tick}} (it went away)"
+            raise LinkError("interrupted: " + why.format(tick=frame.tick)) from None
+        finally:
+            self._waiting_since = None
+
+    def close(self) -> None:
+        self._closed.set()
+        self.channel.close()
 
 
 class RemoteError(RuntimeError):
@@ -401,6 +507,7 @@ class Host:
         self._seen_set: set[bytes] = set()
         # the lockstep stream of the current trial: [nonce, trial_id, next tick] (set by a controller reset)
         self._stream: list | None = None
+        self._reply_tags: dict[str, str] = {}  # the tag of the reply to each stream message type
         self.run_dir = Path(spec["run_dir"]) if spec.get("run_dir") else None
 
     def stop(self) -> None:
@@ -426,16 +533,21 @@ class Host:
         rec = None
         sinks = []  # telemetry sinks to close at exit (after their modules)
         controller = None  # a controller hosted in this body worker
+        server = None  # a controller's end of a socket lockstep link
         ticks = self.session
         try:
             # a body worker and its controller process: their lockstep link ({"listen": ...} for the
             # controller, {"connect": ...} for the body), or the mesh when the spec names none
-            tick = spec.get("tick")
-            if tick:
+            tick = spec.get("tick") or {}
+            ends = [f"listening on {e}" for e in tick.get("listen", [])] + [
+                f"connecting to {e}" for e in tick.get("connect", [])
+            ]
+            ends_named = (*tick.get("listen", []), *tick.get("connect", []))
+            socket_end = next((e for e in ends_named if ticklink.is_socket(e)), None)
+            if socket_end is not None:  # lockstep.link: socket (sfl_brain.ticklink)
+                log.info("lockstep link (socket): %s", ", ".join(ends))
+            elif tick:  # lockstep.link: zenoh
                 self.ticks = ticks = bus.open_tick_session(tick.get("listen", []), tick.get("connect", []))
-                ends = [f"listening on {e}" for e in tick.get("listen", [])] + [
-                    f"connecting to {e}" for e in tick.get("connect", [])
-                ]
                 log.info("lockstep link (lowlatency): %s", ", ".join(ends))
             rec = make_recording(self.run_id, spec.get("rrd"), spec.get("viewer"))
             live = bool(spec.get("viewer"))
@@ -457,6 +569,19 @@ class Host:
                     )
                     sinks.append(controller.telemetry)
                     self.module.link = InProcessLink(controller)
+                elif self.module.COMMANDS and socket_end is not None:
+                    self.link = SocketLink(
+                        self.session,
+                        self.run_id,
+                        self.instance,
+                        spec["routes"][SensorFrame.TAG],
+                        spec["tick_timeout"],
+                        spec.get("spin", 0.0),
+                        endpoint=socket_end,
+                        secret=spec.get("secret"),
+                        drops=self.drops,
+                    )
+                    self.module.link = self.link
                 elif self.module.COMMANDS:
                     self.link = BusLink(
                         self.session,
@@ -472,7 +597,17 @@ class Host:
                     self.module.link = self.link
             for message_type in type(self.module).handles:
                 key_expr = bus.key(self.run_id, self.instance, message_type.TAG)
-                if message_type.STREAM:  # one thread blocks in recv(): no Python handoff per tick
+                if message_type.STREAM and socket_end is not None:  # a thread per connection blocks in recv()
+                    if server is not None:
+                        raise ValueError(f"{self.instance}: a socket lockstep link carries one stream message type")
+                    answer = functools.partial(self._stream_answer, message_type, decoder_for(message_type))
+                    server = ticklink.Server(
+                        socket_end,
+                        answer,
+                        on_refused=lambda: self.drops("foreign", "lockstep connection", "too many connections"),
+                        on_oversized=lambda n, t=message_type.TAG: self.drops("malformed", f"{t} frame", f"{n} B"),
+                    )
+                elif message_type.STREAM:  # one thread blocks in recv(): no Python handoff per tick
                     subscriber = ticks.declare_subscriber(key_expr, zenoh.handlers.RingChannel(64))
                     thread = threading.Thread(
                         target=self._stream_loop,
@@ -492,6 +627,8 @@ class Host:
             token.undeclare()
         finally:
             self._stopping = True
+            if server is not None:
+                server.close()
             for key_expr, subscriber, thread in streams:
                 ticks.put(key_expr, b"")  # wakes the stream thread, which sees _stopping
                 thread.join(timeout=2.0)
@@ -589,47 +726,57 @@ class Host:
             query.drop()
 
     def _stream_loop(self, subscriber, message_type: type[Message]) -> None:
-        """Answer lockstep stream messages: check the trial's nonce, decode, check trial and tick,
-        handle, publish the reply (one per tick) with the same nonce."""
-        handle, lock, publishers, drops = self.module.handle, self._lock, self._publishers, self.drops
-        recv, decode_stream = subscriber.recv, decoder_for(message_type)
+        """Answer lockstep stream messages arriving on a Zenoh subscriber (:meth:`_stream_answer`); publish
+        each reply to the instance the routes name."""
+        answer, recv, publishers = self._stream_answer, subscriber.recv, self._publishers
+        decode_stream = decoder_for(message_type)
         while True:
             data = recv().payload.to_bytes()
             if self._stopping:
                 return
-            stream = self._stream
-            if stream is None or data[-8:] != stream[0]:
-                drops("foreign", f"{message_type.TAG} frame", "not the current trial's stream nonce")
-                continue
-            try:
-                msg = decode_stream(data[:-8])
-            except (MessageError, NonFiniteError) as exc:  # a body checks its own sensors: not from it
-                drops("malformed", f"{message_type.TAG} frame", str(exc))
-                continue
-            if type(msg) is not message_type:
-                drops("malformed", f"{message_type.TAG} frame", f"a {getattr(msg, 'TAG', msg)}")
-                continue
-            tick = getattr(msg, "tick", None)
-            if tick is not None and (msg.trial_id != stream[1] or tick != stream[2]):
-                drops(
-                    "stale",
-                    f"{message_type.TAG} frame",
-                    f"trial {msg.trial_id} tick {tick} while expecting trial {stream[1]} tick {stream[2]}",
-                )
-                continue
-            stream[2] += 1
-            try:
-                with lock:
-                    reply = handle(msg, checked=True)  # decoded: checked by the codec
-            except Exception:
-                log.exception("%s: error handling a stream message", self.instance)
-                continue
+            reply = answer(message_type, decode_stream, data)
             if reply is not None:
-                publisher = publishers.get(reply.TAG)
+                tag = self._reply_tags[message_type.TAG]
+                publisher = publishers.get(tag)
                 if publisher is None:
-                    key_expr = self._reply_key(reply.TAG)
-                    publisher = publishers[reply.TAG] = (self.ticks or self.session).declare_publisher(key_expr)
-                publisher.put(encode(reply) + stream[0])
+                    publisher = publishers[tag] = (self.ticks or self.session).declare_publisher(self._reply_key(tag))
+                publisher.put(reply)
+
+    def _stream_answer(self, message_type: type[Message], decode_stream, data: bytes) -> bytes | None:
+        """The reply to one lockstep stream message (encoded, with the trial's nonce), or None: check the
+        trial's nonce, decode, check trial and tick, handle. What fails is dropped and counted."""
+        drops = self.drops
+        stream = self._stream
+        if stream is None or data[-8:] != stream[0]:
+            drops("foreign", f"{message_type.TAG} frame", "not the current trial's stream nonce")
+            return None
+        try:
+            msg = decode_stream(data[:-8])
+        except (MessageError, NonFiniteError) as exc:  # a body checks its own sensors: not from it
+            drops("malformed", f"{message_type.TAG} frame", str(exc))
+            return None
+        if type(msg) is not message_type:
+            drops("malformed", f"{message_type.TAG} frame", f"a {getattr(msg, 'TAG', msg)}")
+            return None
+        tick = getattr(msg, "tick", None)
+        if tick is not None and (msg.trial_id != stream[1] or tick != stream[2]):
+            drops(
+                "stale",
+                f"{message_type.TAG} frame",
+                f"trial {msg.trial_id} tick {tick} while expecting trial {stream[1]} tick {stream[2]}",
+            )
+            return None
+        stream[2] += 1
+        try:
+            with self._lock:
+                reply = self.module.handle(msg, checked=True)  # decoded: checked by the codec
+        except Exception:
+            log.exception("%s: error handling a stream message", self.instance)
+            return None
+        if reply is None:
+            return None
+        self._reply_tags[message_type.TAG] = reply.TAG
+        return encode(reply) + stream[0]
 
 
 def _watch_parent(host: Host) -> None:

@@ -39,7 +39,7 @@ from pathlib import Path
 
 import zenoh
 
-from . import bus, processes
+from . import bus, processes, ticklink
 from .body import Body, Controller
 from .events import Events, ModuleAlive, ModuleDied, ModuleSilent, Restarted, WorkerJoined, WorkerLeft
 from .host import LinkError
@@ -256,11 +256,16 @@ class Supervisor:
         if pairs and hasattr(socket, "AF_UNIX") and os.name != "nt":  # Zenoh has no unixsock-stream on Windows
             self.tick_folder = tempfile.mkdtemp(prefix="sfl-")  # 0700: only this user may connect
             if len(os.fsencode(self.tick_folder)) + len(f"/{len(pairs)}.sock") < UNIX_PATH_MAX:
+                on_socket = self.plan.scenario.lockstep.link == "socket" and ticklink.available()
+                endpoint_of = ticklink.endpoint if on_socket else bus.tick_endpoint
                 for i, pair in enumerate(pairs):
-                    endpoint = bus.tick_endpoint(self.tick_folder, str(i))
+                    endpoint = endpoint_of(self.tick_folder, str(i))
                     self.ticks[pair.controller] = {"listen": [endpoint]}
                     self.ticks[pair.body] = {"connect": [endpoint]}
-                links = f"lockstep links in {self.tick_folder}"
+                kind = "Unix sockets" if on_socket else "Zenoh lowlatency sessions"
+                if self.plan.scenario.lockstep.link == "socket" and not on_socket:
+                    kind += " (lockstep.link: socket needs SOCK_SEQPACKET Unix sockets, which this OS lacks)"
+                links = f"lockstep links ({kind}) in {self.tick_folder}"
             else:
                 links = f"the mesh (the temporary folder {self.tick_folder} is too long a path for a Unix socket)"
         placed = self.placement.to_json() | {"lockstep_links": self.ticks, "ticks_on": links}

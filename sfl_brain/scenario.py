@@ -340,6 +340,12 @@ class Lockstep(Strict):
         "a core per pair; always = also with more pairs than cores (pairs share cores in turn); "
         "never = leave every process to the OS scheduler",
     )
+    link: Literal["socket", "zenoh"] = Field(
+        "socket",
+        description="what carries a body worker's frames and its controller process's commands: socket = a Unix "
+        "socket of their own (two system calls a message; Linux; elsewhere zenoh), zenoh = a Zenoh session of "
+        "their own on the lowlatency transport; requests, replies and liveliness stay on the run's Zenoh mesh",
+    )
 
 
 class ScenarioModel(Strict):

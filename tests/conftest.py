@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import subprocess
 import sys
 import threading
@@ -151,3 +152,50 @@ def joined_run(scenario, out, *sets: str, modules: int):
     """:func:`listening_run`, yielding (process, Zenoh session, run id)."""
     with listening_run(scenario, out, *sets, modules=modules) as run:
         yield run.proc, run.session, run.run_id
+
+
+class TickStranger:
+    """A process of this user on a running run's lockstep link (``logs/placement.json``), which it may reach
+    (the link's folder is this user's): ``put(key, payload)`` sends to the controller's end, on a socket
+    link (``lockstep.link: socket``) over a connection of its own, on a Zenoh link on a session of its own.
+    The body's end of a socket link only connects: nothing put to the body's keys reaches it."""
+
+    def __init__(self, run_dir: Path) -> None:
+        from sfl_brain import bus, ticklink
+
+        links = json.loads((Path(run_dir) / "logs" / "placement.json").read_text())["lockstep_links"]
+        self.endpoint = links["controller"]["listen"][0]
+        self.on_socket = ticklink.is_socket(self.endpoint)
+        self.session = None if self.on_socket else bus.open_tick_session([], [self.endpoint])
+        self.sock = None
+        self.sent = 0
+
+    def put(self, key: str, payload: bytes) -> None:
+        import socket
+
+        from sfl_brain import ticklink
+
+        if self.session is not None:
+            self.session.put(key, payload)
+            self.sent += 1
+            return
+        if not key.endswith("controller.sensors"):
+            return
+        try:
+            if self.sock is None:
+                self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+                self.sock.connect(ticklink.path_of(self.endpoint))
+            self.sock.send(payload)
+            self.sent += 1
+        except OSError:  # an empty message ends the connection (end of file): connect again next time
+            self.close_socket()
+
+    def close_socket(self) -> None:
+        if self.sock is not None:
+            self.sock.close()
+            self.sock = None
+
+    def close(self) -> None:
+        self.close_socket()
+        if self.session is not None:
+            self.session.close()

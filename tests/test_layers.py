@@ -32,7 +32,14 @@ from sfl_brain.service import Interrupted, RunError
 from .conftest import ROOT, SCENARIOS
 
 LEARN = SCENARIOS / "analytic_learn.yaml"
-ZENOH_SIDE = ("zenoh", "sfl_brain.runtime", "sfl_brain.bus", "sfl_brain.host", "sfl_brain.processes")
+ZENOH_SIDE = (
+    "zenoh",
+    "sfl_brain.runtime",
+    "sfl_brain.bus",
+    "sfl_brain.host",
+    "sfl_brain.processes",
+    "sfl_brain.ticklink",
+)
 
 
 def stable(rows):

@@ -27,9 +27,10 @@ def logs(out) -> dict[str, str]:
     return {p.stem: p.read_text() for p in (out / "logs").glob("*.log")}
 
 
-def test_a_run_pins_its_pair_to_one_core_logs_it_and_ticks_on_its_lockstep_link(tmp_path):
+@pytest.mark.parametrize("link", ["socket", "zenoh"])
+def test_a_run_pins_its_pair_to_one_core_logs_it_and_ticks_on_its_lockstep_link(tmp_path, link):
     out = tmp_path / "run"
-    done = sfl_run(QUICK, out, *SETS)
+    done = sfl_run(QUICK, out, *SETS, f"lockstep.link={link}")
     assert done.returncode == 0, done.stderr
     expected = place([Pair("body", "controller")], ["acc", "vigilance", "ofc"], usable_cpus(), "auto")
     assert f"sfl: {expected.describe()}" in done.stdout.splitlines()  # the line a user sees
@@ -42,11 +43,13 @@ def test_a_run_pins_its_pair_to_one_core_logs_it_and_ticks_on_its_lockstep_link(
         assert f"pinned to cores [{core}]" in text["body"] and f"pinned to cores [{core}]" in text["controller"]
         assert f"pinned to cores {usable_cpus()[:-1]}" in text["acc"]
     # the frames and commands went over the pair's own link: the controller listens, the body connects
-    link = placed["lockstep_links"]["controller"]["listen"][0]
-    assert placed["lockstep_links"]["body"] == {"connect": [link]} and link.startswith("unixsock-stream/")
-    assert f"lockstep link (lowlatency): listening on {link}" in text["controller"]
-    assert f"lockstep link (lowlatency): connecting to {link}" in text["body"]
-    assert not os.path.exists(os.path.dirname(link.removeprefix("unixsock-stream/")))  # removed with the run
+    endpoint = placed["lockstep_links"]["controller"]["listen"][0]
+    scheme, kind = {"socket": ("seqpacket/", "socket"), "zenoh": ("unixsock-stream/", "lowlatency")}[link]
+    assert placed["lockstep_links"]["body"] == {"connect": [endpoint]} and endpoint.startswith(scheme)
+    assert placed["ticks_on"].startswith("lockstep links (" + ("Unix sockets" if link == "socket" else "Zenoh"))
+    assert f"lockstep link ({kind}): listening on {endpoint}" in text["controller"]
+    assert f"lockstep link ({kind}): connecting to {endpoint}" in text["body"]
+    assert not os.path.exists(os.path.dirname(endpoint.removeprefix(scheme)))  # removed with the run
     # over processes, the same trials as in one process
     assert stable(read_records(out)) == stable(run_local(load(QUICK, list(SETS))))
 
@@ -116,3 +119,74 @@ def test_on_its_link_the_body_takes_only_its_trials_command_and_counts_the_rest(
         queryable.undeclare()
         for session in (body_end, controller_end, mesh):
             session.close()
+
+
+def test_on_its_socket_link_the_body_takes_only_its_trials_command_and_a_dead_controller_ends_the_tick(tmp_path):
+    """``lockstep.link: socket``: the body's end takes only the command with this trial's nonce, trial and tick
+    (the rest is counted and dropped); when the controller's end goes away the waiting tick ends at once (not
+    after the tick timeout), and the next trial connects again, to the controller's restart."""
+    import socket
+    import threading
+    import time
+
+    import numpy as np
+
+    from sfl_brain import bus, ticklink
+    from sfl_brain.host import LinkError, SocketLink
+    from sfl_brain.messages import Ack, ControllerReset, MotorCommand, SensorFrame, decode, encode
+
+    endpoint = ticklink.endpoint(tmp_path, "0")
+    mesh = bus.open_session([bus.free_endpoint()], [])
+    seal = bus.Seal(None)
+
+    def reset(query):  # the controller's reset, as its host answers it
+        nonce, body = seal.open_request(str(query.key_expr), query.payload.to_bytes())
+        assert type(decode(body)) is ControllerReset
+        query.reply(query.key_expr, seal.seal_reply(nonce, encode(Ack())))
+        query.drop()
+
+    def command(trial, tick):
+        return encode(MotorCommand(trial_id=trial, tick=tick, values=np.ones(2)))
+
+    def listen():
+        server = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+        server.bind(ticklink.path_of(endpoint))
+        server.listen(1)
+        return server
+
+    queryable = mesh.declare_queryable(bus.key("r", "controller", ControllerReset.TAG), reset)
+    link = SocketLink(mesh, "r", "body", "controller", timeout=10.0, endpoint=endpoint)
+    server = listen()
+    try:
+
+        def answer():  # garbage, another trial's nonce, a stale tick, then the command; then it dies
+            conn, _ = server.accept()
+            data = conn.recv(65536)
+            nonce, frame = data[-8:], decode(data[:-8])
+            stale = command(frame.trial_id, 5) + nonce
+            for payload in (b"\x00garbage", command(7, 0) + bytes(8), stale, b"\xc1" + nonce):
+                conn.send(payload)
+            conn.send(command(frame.trial_id, frame.tick) + nonce)
+            conn.recv(65536)  # the next frame, never answered
+            conn.close()
+            server.close()
+            os.unlink(ticklink.path_of(endpoint))
+
+        threading.Thread(target=answer, daemon=True).start()
+        link.reset(ControllerReset(trial_id=7, seed=0, params={}, sensors=["a"], commands=["b", "c"]))
+        got = link.step(SensorFrame(trial_id=7, tick=0, values=np.zeros(1)))
+        assert (got.trial_id, got.tick, list(got.values)) == (7, 0, [1.0, 1.0])
+        assert link.drops.counts == {"foreign": 2, "stale": 1, "malformed": 1}
+        t = time.perf_counter()
+        with pytest.raises(LinkError, match="closed at tick 1"):
+            link.step(SensorFrame(trial_id=7, tick=1, values=np.zeros(1)))
+        assert time.perf_counter() - t < 2.0  # at once, not after the 10-s tick timeout
+        # the restarted controller listens again a little later; the next trial's reset connects to it
+        threading.Timer(0.3, lambda: setattr(link, "restarted", listen())).start()
+        link.reset(ControllerReset(trial_id=8, seed=0, params={}, sensors=["a"], commands=["b", "c"]))
+        assert link.channel.connected
+        link.restarted.close()
+    finally:
+        link.close()
+        queryable.undeclare()
+        mesh.close()

@@ -201,7 +201,7 @@ def test_garbage_on_the_tick_keys_is_dropped_and_changes_nothing(tmp_path):
     from sfl_brain import bus
     from sfl_brain.messages import SCHEMA_VERSION, SensorFrame, encode
 
-    from .conftest import joined_run
+    from .conftest import TickStranger, joined_run
 
     out = tmp_path / "run"
     sets = ["protocol.trials=10", "record.body_every=0"]
@@ -217,8 +217,7 @@ def test_garbage_on_the_tick_keys_is_dropped_and_changes_nothing(tmp_path):
     with joined_run(SCENARIOS / "quickstart.yaml", out, *sets, modules=5) as (proc, session, run_id):
         keys = [bus.key(run_id, "controller", "controller.sensors"), bus.key(run_id, "body", "body.command")]
         # the ticks go over the pair's own link, off the mesh (this user may connect to it): spray both
-        links = json.loads((out / "logs" / "placement.json").read_text())["lockstep_links"]
-        link = bus.open_tick_session([], links["controller"]["listen"])
+        link = TickStranger(out)
 
         def spray():
             while not stop.wait(0.02):  # slow enough never to fill a 64-deep ring between two reads
@@ -237,7 +236,7 @@ def test_garbage_on_the_tick_keys_is_dropped_and_changes_nothing(tmp_path):
             link.close()
     # none of it carries the trial's stream nonce: the controller drops it as foreign, counts it, logs it once
     counted = json.loads((out / "logs" / "controller.counters.json").read_text())["dropped"]
-    assert counted.get("foreign", 0) > 0, counted
+    assert link.sent > 0 and counted.get("foreign", 0) > 0, counted
     assert "not the current trial's stream nonce" in (out / "logs" / "controller.log").read_text()
     # the body's end of the link connects to its controller only: none of it reached the body (its own checks:
     # tests/test_placement_run.py)

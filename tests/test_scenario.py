@@ -213,6 +213,11 @@ def test_lockstep_processes_are_the_body_workers_and_their_controller_processes(
         "body.1",
     ]
     assert load(SCENARIOS / "analytic_learn.yaml").lockstep_processes == ["body"]
+    assert load(quick).scenario.lockstep.link == "socket"  # their ticks on a Unix socket of their own
+    assert load(quick, ["lockstep.link=zenoh"]).scenario.lockstep.link == "zenoh"
+    said = r"lockstep\.link: expected one of 'socket' or 'zenoh'; got 'zenho' \(did you mean `zenoh`"
+    with pytest.raises(ScenarioError, match=said):
+        load(quick, ["lockstep.link=zenho"])
 
 
 def test_strict_types_keep_what_is_right(write_scenario):

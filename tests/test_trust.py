@@ -16,7 +16,7 @@ from sfl_brain.local import run_local
 from sfl_brain.records import read_records
 from sfl_brain.scenario import load
 
-from .conftest import SCENARIOS, listening_run
+from .conftest import SCENARIOS, TickStranger, listening_run
 
 VOLATILE = {"wall_ms", "worker"}
 # a short walker run: 5 processes (body and controller apart), 300 ticks a trial
@@ -114,8 +114,7 @@ def test_garbage_on_every_key_of_a_running_run_changes_nothing(tmp_path):
     instances = ["acc", "vigilance", "ofc", "body", "controller"]
     with listening_run(WALKER, out, *WALKER_SETS, modules=5) as run:
         # the body and its controller tick on a link of their own, off the mesh: the stranger joins it too
-        links = json.loads((out / "logs" / "placement.json").read_text())["lockstep_links"]
-        link = bus.open_tick_session([], links["controller"]["listen"])
+        link = TickStranger(out)
         stranger = Stranger(run.session, run.run_id, instances, link)
         rounds = 0
         try:
