@@ -36,10 +36,12 @@ def test_bus_benchmark_prints_the_floors_bare_zenoh_and_the_framework_side_by_si
         "bus.py", "--ticks", "100", "--repeats", "1", "--busy-repeats", "1", "--block", "50", "--startup-repeats", "1"
     )
     assert "load average" in out  # how busy the machine was
-    # one process, two pipes, shared memory, bare Zenoh (mesh on two cores and one core, the lockstep link) and the
-    # framework before and now, then four of them beside one busy process
-    figures(out, r"  \S[^\n]*?  +([\d.]+)  \(IQR", count=10 + 4)
-    figures(out, r"framework / bare Zenoh in the same configuration \(lockstep link, one core\): ([\d.]+)")
+    # one process, two pipes, shared memory, bare Zenoh (mesh on two cores and one core, the lockstep link), typed by
+    # hand, the framework before and on the Zenoh link, the bare socket, typed by hand and the framework on it now;
+    # then five of them beside one busy process
+    figures(out, r"  \S[^\n]*?  +([\d.]+)  \(IQR", count=13 + 5)
+    figures(out, r"framework / bare socket in the same configuration \(socket link, one core\): ([\d.]+)")
+    figures(out, r"framework / bare Zenoh in the same configuration \(Zenoh lockstep link, one core\): ([\d.]+)")
     figures(out, r"first trial done ([\d.]+) s", count=2)  # placed and not
 
 
@@ -47,13 +49,17 @@ def test_planar_benchmark_prints_the_trial_ratios_beside_the_floors_and_the_swee
     out = bench("planar.py", "--repeats", "1", "--busy-repeats", "1", "--grid", "2")
     assert "load average" in out
     figures(out, r"\(c\)/\(b\) = ([\d.]+)", count=2)  # alone, and beside one busy process
+    figures(out, r"\(c-zenoh\)/\(b\) = ([\d.]+)", count=2)  # the ticks on a Zenoh link, the same two ways
     figures(out, r"\(b0\)/\(b\) = ([\d.]+)")  # the body before batching, measured beside it
     figures(out, r"\((?:c-free|c-mesh|c-apart)\)/\(b\) = ([\d.]+)", count=3)
     # the floors, the last two also beside one busy process
     figures(out, r"    pipe, both blocking, [^:\n]*: ([\d.]+)")
+    figures(out, r"    socket \(SOCK_SEQPACKET\), both blocking[^:\n]*: ([\d.]+)")
+    figures(out, r"    socket, both blocking on [^:\n]*: ([\d.]+)")  # beside one busy process
     figures(out, r"    shared memory, both spinning[^:\n]*: ([\d.]+)", count=2)
     figures(out, r"    bare Zenoh, lockstep link[^:\n]*: ([\d.]+)", count=2)
-    figures(out, r"framework / bare Zenoh in the same configuration: ([\d.]+)")
+    figures(out, r"socket link \(\(c\)/\(b\)\) / \(socket/\(a\)\) ([\d.]+)")
+    figures(out, r"Zenoh link \(\(c-zenoh\)/\(b\)\) / \(bare Zenoh/\(a\)\) ([\d.]+)")
     figures(out, r"speed-up ([\d.]+)x", count=2)
 
 
