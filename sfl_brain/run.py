@@ -437,12 +437,19 @@ def run(
     cleanup: list[str] = []
 
     def on_signal(signum, _frame):
+        # This handler never raises. Python runs it in the main thread at whatever Python code that thread runs
+        # next, and that can be a Zenoh callback: with indirect=False, Zenoh calls the reply and query-end
+        # callbacks of Supervisor.submit in the thread that happens to finish the query, sometimes the main
+        # thread inside session.get. Zenoh logs what a callback raises ("callback error") and drops it: the
+        # Ctrl-C was lost. So the first signal only asks the supervisor to raise it where the run waits for
+        # an event (it wakes the wait), in the run's own code, and the interrupted path below runs.
         stopping["signals"] += 1
         if not stopping["cleaning"] and stopping["signals"] == 1:
-            raise KeyboardInterrupt if signum == signal.SIGINT else _Terminate()
+            sup.raise_at_wait(KeyboardInterrupt if signum == signal.SIGINT else _Terminate)
+            return
         # a second signal (or one while the run is already stopping): the fast path. Kill the
-        # children now instead of waiting for them; the records, summary and recording are still
-        # written, because this handler never raises during the clean-up.
+        # children now instead of waiting for them (a wait still to come raises the first signal); the
+        # records, summary and recording are still written.
         print("sfl: stopping now: module processes killed; writing the summary", file=sys.stderr, flush=True)
         for pid in sup.pids():
             kill_quietly(pid)

@@ -5,7 +5,8 @@ process per module (:mod:`sfl_brain.processes`), watches their liveliness tokens
 and applies the restart policy. Everything that can happen while a protocol waits (a reply, a
 module coming alive or going silent, a process exiting) is a typed value on one queue, handled in
 the waiting thread, so waiting for a reply also notices a dead module at once instead of at a
-time-out. Zenoh callbacks only put on that queue.
+time-out. Zenoh callbacks only put on that queue; so does the run's signal handler
+(:meth:`Supervisor.raise_at_wait`), so Ctrl-C is raised in the waiting thread, never inside a callback.
 
 Faults are types. A request whose target exits, leaves, or answers with a :class:`~sfl_brain.host.LinkError`
 (its controller died or hung mid-trial) ends :class:`~sfl_brain.service.Interrupted`: the protocol may
@@ -94,6 +95,11 @@ class QueryEnded:
     ticket: int
 
 
+@dataclass(frozen=True)
+class Wake:
+    """Nothing happened: wakes the waiting thread to look at :meth:`Supervisor.raise_at_wait`'s request."""
+
+
 @dataclass
 class Pending:
     target: str
@@ -155,6 +161,8 @@ class Supervisor:
         #: the lifecycle and faults of the run's modules, published as they are handled
         self.events = events or Events()
         self._inbox: queue.SimpleQueue = queue.SimpleQueue()
+        #: what every wait raises from now on (:meth:`raise_at_wait`), None while the run goes on
+        self._stop_with: type[BaseException] | None = None
         self.children: dict[str, Child] = {}
         self.pending: dict[int, Pending] = {}
         self._tickets = itertools.count()
@@ -316,11 +324,22 @@ class Supervisor:
             self.session = None
 
     # ------------------------------------------------------------------ events
+    def raise_at_wait(self, exc_type: type[BaseException]) -> None:
+        """Make the waiting thread raise ``exc_type`` where it waits for an event (now, if it is waiting): how a
+        signal handler stops the run. Safe in a signal handler: ``SimpleQueue.put`` is reentrant."""
+        self._stop_with = exc_type
+        self._inbox.put(Wake())
+
     def _next_event(self, timeout: float | None):
+        if self._stop_with is not None:
+            raise self._stop_with
         try:
-            return self._inbox.get(timeout=timeout)
+            event = self._inbox.get(timeout=timeout)
         except queue.Empty:
-            return None
+            event = None
+        if self._stop_with is not None:
+            raise self._stop_with
+        return event
 
     def _handle(self, event, starting: bool = False) -> None:
         match event:

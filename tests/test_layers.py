@@ -199,6 +199,46 @@ def test_retry_is_decided_by_the_remote_fault_type():
     assert type(failed) is RunError
 
 
+def test_a_signal_that_lands_in_a_callback_is_raised_where_the_run_waits(tmp_path):
+    """Ctrl-C of `sfl run`: its handler does not raise (in a Zenoh callback on the main thread the exception would be
+    logged and dropped) but asks the supervisor to raise at its wait, which it wakes."""
+    import os
+    import signal
+    import threading
+    import time
+
+    from sfl_brain.runtime import Pending
+
+    sup, _ = supervisor(tmp_path)
+    sup.pending[7] = Pending("body", m.Rejected(consecutive=0))  # never answered
+    swallowed, timer = [], None
+
+    def callback_on_the_main_thread():  # as Zenoh runs one: what it raises is logged, not propagated
+        try:
+            signal.raise_signal(signal.SIGINT)  # the handler runs here, inside the callback
+        except BaseException as exc:  # noqa: BLE001
+            swallowed.append(exc)
+
+    previous = signal.signal(signal.SIGINT, lambda *_: sup.raise_at_wait(KeyboardInterrupt))
+    try:
+        callback_on_the_main_thread()
+        assert swallowed == []
+        with pytest.raises(KeyboardInterrupt):
+            sup.wait_any([7], timeout=5)
+        # a signal while the run already waits wakes it at once
+        sup, _ = supervisor(tmp_path)
+        timer = threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGINT))  # its handler runs in the main thread
+        timer.start()
+        began = time.monotonic()
+        with pytest.raises(KeyboardInterrupt):
+            sup._next_event(timeout=30)  # woken by the handler's Wake, not by the time-out
+        assert time.monotonic() - began < 5
+    finally:
+        if timer is not None:
+            timer.join()
+        signal.signal(signal.SIGINT, previous)
+
+
 def import_graph() -> dict[str, set[str]]:
     """Which of our modules each module of ``sfl_brain`` imports, anywhere in it (a function's deferred import and
     a ``TYPE_CHECKING`` one count: each is a dependency a reader follows)."""

@@ -315,9 +315,7 @@ def test_ctrl_c_stops_every_run_of_the_study_and_says_how_to_resume(tmp_path):
     assert study.returncode == 130, stderr
     assert "sfl: study interrupted; 0 of 2 runs are done and kept. The same command resumes it" in stderr
     for name in ("run_seed0", "run_seed1"):
-        # interrupted; or, when `sfl run` lost the first SIGINT (it can land in a Zenoh callback that swallows it,
-        # "sfl ERROR callback error ... KeyboardInterrupt" in its log), failed after the study's second SIGINT
         summary = json.loads((out / name / "summary.json").read_text())
-        assert summary["status"] in ("interrupted", "failed"), summary
+        assert summary["status"] == "interrupted", summary
     _, alive = psutil.wait_procs(family, timeout=10)
     assert not alive, [p.cmdline() for p in alive]
