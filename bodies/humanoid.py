@@ -121,6 +121,7 @@ UPPER = np.array([j.upper for j in JOINTS])
 EFFORT = np.array([j.effort for j in JOINTS])
 SPEED = np.array([j.velocity for j in JOINTS])
 MOTOR = np.array([motor_coefficient(j) for j in JOINTS])  # c_i of P = c_i tau_i^2, W / (N m)^2
+_SPEED, _EFFORT = SPEED.tolist(), EFFORT.tolist()  # the same, as floats for the servo loop (actuate)
 FEET = ("foot_l", "foot_r")
 FSR_NAMES = tuple(f"fsr_{side}_{end}_{edge}" for side in "lr" for end in ("toe", "heel") for edge in ("inner", "outer"))
 
@@ -466,8 +467,9 @@ class Humanoid(Body):
     # ------------------------------------------------------------------ sensing
     def _read_joints(self) -> None:
         states = pb.getJointStates(self.robot, self.joint_index, physicsClientId=self.client)
-        q, dq, _, tau = zip(*states, strict=True)
+        q, dq, _, tau = (list(column) for column in zip(*states, strict=True))
         self.q, self.dq, self.tau = np.array(q), np.array(dq), np.array(tau)
+        self._joint_lists = (q, dq, tau)  # the same as plain floats, for sense
 
     def _read_torso(self) -> None:
         """The torso's centre of mass, its own frame's rotation matrix, and its spin in that frame."""
@@ -482,67 +484,96 @@ class Humanoid(Body):
     def _foot_pressure(self) -> list[float]:
         """The 8 FSR forces (N, FSR_NAMES order): each sole contact's normal force shared bilinearly between
         the toe and heel rows and the inner and outer columns of its foot's sensors (the shares add up to
-        the force; a contact beyond a row or column counts as on it). Plain floats: a foot has few contacts."""
+        the force; a contact beyond a row or column counts as on it). Plain floats: a foot has few contacts.
+
+        The robot's contact points and both feet's frames are asked for once each; the points are shared out by link:
+        the same points in the same order as asking per foot (PyBullet filters its one list of points either way;
+        tests/test_humanoid_speed.py). Each clip to [0, 1] is written as
+        ``min(max(share, 0.0), 1.0)`` computes it (a NaN passes through)."""
         c, robot = self.client, self.robot
         toe_x, heel_x = FSR_X
         inner_y, outer_y = FSR_Y
+        length, width = toe_x - heel_x, outer_y - inner_y
         fsr = [0.0] * 8
-        for k, foot in enumerate(self.foot_index):
-            contacts = pb.getContactPoints(bodyA=robot, linkIndexA=foot, physicsClientId=c)
-            if not contacts:
+        contacts = pb.getContactPoints(bodyA=robot, physicsClientId=c)
+        if not contacts:
+            return fsr
+        feet = self.foot_index
+        states = pb.getLinkStates(robot, feet, physicsClientId=c)  # both feet's frames in one call
+        for k, (foot, state) in enumerate(zip(feet, states, strict=True)):
+            on_foot = [contact for contact in contacts if contact[3] == foot]
+            if not on_foot:
                 continue
-            origin, turn = pb.getLinkState(robot, foot, physicsClientId=c)[4:6]
-            r = pb.getMatrixFromQuaternion(turn)  # row-major; the foot's axes are its columns
+            (ox, oy, oz), turn = state[4:6]
+            r0, r1, _, r3, r4, _, r6, r7, _ = pb.getMatrixFromQuaternion(turn)  # row-major; the foot's axes: columns
             side = 1.0 if k == 0 else -1.0  # the right foot is the left's mirror image in y
-            for contact in contacts:
-                dx, dy, dz = (contact[5][i] - origin[i] for i in range(3))
-                x = r[0] * dx + r[3] * dy + r[6] * dz  # into the foot's frame
-                y = side * (r[1] * dx + r[4] * dy + r[7] * dz)
-                toe = min(max((x - heel_x) / (toe_x - heel_x), 0.0), 1.0)
-                outer = min(max((y - inner_y) / (outer_y - inner_y), 0.0), 1.0)
+            toe_outer = toe_inner = heel_inner = heel_outer = 0.0
+            for contact in on_foot:
+                px, py, pz = contact[5]
+                dx, dy, dz = px - ox, py - oy, pz - oz
+                x = r0 * dx + r3 * dy + r6 * dz  # into the foot's frame
+                y = side * (r1 * dx + r4 * dy + r7 * dz)
+                toe = (x - heel_x) / length
+                toe = 0.0 if 0.0 > toe else toe
+                toe = 1.0 if 1.0 < toe else toe
+                outer = (y - inner_y) / width
+                outer = 0.0 if 0.0 > outer else outer
+                outer = 1.0 if 1.0 < outer else outer
                 force = contact[9]
-                fsr[4 * k] += force * toe * (1 - outer)
-                fsr[4 * k + 1] += force * toe * outer
-                fsr[4 * k + 2] += force * (1 - toe) * (1 - outer)
-                fsr[4 * k + 3] += force * (1 - toe) * outer
+                toe_inner += force * toe * (1 - outer)
+                toe_outer += force * toe * outer
+                heel_inner += force * (1 - toe) * (1 - outer)
+                heel_outer += force * (1 - toe) * outer
+            fsr[4 * k : 4 * k + 4] = toe_inner, toe_outer, heel_inner, heel_outer
         return fsr
 
     def sense(self) -> np.ndarray:
         fsr = self._foot_pressure()
-        up = self.torso_turn[2]  # the world's vertical in the torso's frame
-        imu = [math.atan2(-up[0], up[2]), math.atan2(up[1], up[2]), self.torso_spin[1], self.torso_spin[0]]
+        up0, up1, up2 = self.torso_turn[2].tolist()  # the world's vertical in the torso's frame
+        spin0, spin1 = self.torso_spin[:2].tolist()
+        imu = [math.atan2(-up0, up2), math.atan2(up1, up2), spin1, spin0]
         feet = [fsr[2] + fsr[3], fsr[0] + fsr[1], fsr[6] + fsr[7], fsr[4] + fsr[5]]  # heel_l, toe_l, heel_r, toe_r
-        values = np.concatenate([self.q, self.dq, self.tau, feet, fsr, imu, (self.back,)])
-        return np.minimum(np.maximum(values, SENSOR_LOW), SENSOR_HIGH)  # the sensors saturate
+        q, dq, tau = self._joint_lists
+        values = np.array(q + dq + tau + feet + fsr + imu + [self.back])
+        return np.minimum(np.maximum(values, SENSOR_LOW, out=values), SENSOR_HIGH, out=values)  # the sensors saturate
 
     # ------------------------------------------------------------------ acting
     def actuate(self, command: np.ndarray) -> None:
         p, c, robot, joints = self.params, self.client, self.robot, self.joint_index
-        target = np.minimum(np.maximum(command, LOWER), UPPER)
+        target = np.minimum(np.maximum(command, LOWER), UPPER).tolist()
         h = p.control_dt / p.substeps
+        rate, stiffness = p.servo_rate, p.servo_stiffness
         back = 0.0  # N s pressing the robot forward this tick (a push, the ball): the touch sensor `back`
+        # per physics step, in plain floats (12 joints: cheaper than numpy's calls, the same IEEE operations); each
+        # clip written so that a NaN passes through as np.minimum / np.maximum pass it
+        q, energy = self.q.tolist(), self.energy
+        set_motors, step, joint_states = pb.setJointMotorControlArray, pb.stepSimulation, pb.getJointStates
         for k in range(p.substeps):
-            error = target - self.q
-            speed = np.minimum(np.maximum(p.servo_rate * error, -SPEED), SPEED)  # the servo's speed target
-            torque = np.minimum(p.servo_stiffness * np.abs(error) + HOLD_TORQUE, EFFORT)  # the most it may use
-            pb.setJointMotorControlArray(
-                robot,
-                joints,
-                pb.VELOCITY_CONTROL,
-                targetVelocities=speed.tolist(),
-                forces=torque.tolist(),
-                physicsClientId=c,
-            )
+            speed, torque = [], []
+            for goal, angle, fastest, effort in zip(target, q, _SPEED, _EFFORT, strict=True):
+                error = goal - angle
+                v = rate * error  # the servo's speed target, within +-its speed
+                speed.append(-fastest if v < -fastest else (fastest if v > fastest else v))
+                most = stiffness * abs(error) + HOLD_TORQUE  # the most torque it may use, within its effort
+                torque.append(effort if most > effort else most)
+            set_motors(robot, joints, pb.VELOCITY_CONTROL, targetVelocities=speed, forces=torque, physicsClientId=c)
             if self.push_force > 0 and self.push_start <= self.t + k * h < self.push_end:
                 self._push(self.t + k * h)  # an external force lasts one step: applied every step of the push
                 back += max(float(self.push_vector[0]), 0.0) * h
             if self.ball_mass > 0 and self.t + k * h >= self.ball_time - 1e-9 and not self._ball_thrown:
                 self._throw()
-            pb.stepSimulation(physicsClientId=c)
+            step(physicsClientId=c)
             if self._ball_thrown and self.t + k * h < self.ball_time + BALL_WATCH:
                 back += self._ball_contacts(self.t + (k + 1) * h, h)
-            self._read_joints()
-            self.energy += float(MOTOR @ self.tau**2) * h  # (5.5)-(5.6)
+            states = joint_states(robot, joints, physicsClientId=c)
+            q = [state[0] for state in states]
+            torques = [state[3] for state in states]
+            tau = np.array(torques)
+            energy += float(MOTOR @ tau**2) * h  # (5.5)-(5.6)
+        dq = [state[1] for state in states]
+        self.q, self.dq, self.tau = np.array(q), np.array(dq), tau
+        self._joint_lists = (q, dq, torques)
+        self.energy = energy
         self.back = min(back / p.control_dt, MAX_BACK)
         self.ticks += 1
         self.t = self.ticks * p.control_dt
