@@ -163,7 +163,62 @@ PONG_SOCKET = textwrap.dedent("""
         send(reply)
     sock.close()
 """)
+PONG_CONTROLLER = textwrap.dedent("""
+    import importlib, socket
+    from sfl_brain.messages import SensorFrame, decode, decoder_for, encode
+    sock = socket.socket(fileno=int(sys.argv[2]))  # AF_UNIX, SOCK_SEQPACKET
+    module, _, name = sys.argv[3].partition(":")
+    controller = getattr(importlib.import_module(module), name)()
+    decode_frame, recv, send, handle = decoder_for(SensorFrame), sock.recv, sock.send, controller.handle
+    while True:
+        data = recv(65537)
+        if not data or data == b"stop":
+            break
+        msg = decode_frame(data) if data[0] == 0xC1 else decode(data)  # a frame, or the reset
+        send(encode(handle(msg, checked=True)))
+    sock.close()
+""")
 SENSORS = ("hip_l", "hip_r", "knee_l", "knee_r", "contact_l", "contact_r", "slope", "pitch")
+
+
+class HandLink:
+    """A body's link to a real controller in a child process over a bare ``SOCK_SEQPACKET`` socket, written by
+    hand: the framework's typed messages and the controller's own handler, but no host, no nonce, no checks, no
+    watchdog: what the framework's socket link and host do, less the framework (``reference``: the controller's
+    class, ``module:Class``; ``cores``: where the child runs)."""
+
+    def __init__(self, reference: str, cores) -> None:
+        import socket
+
+        from sfl_brain.messages import MotorCommand, decoder_for
+
+        self.sock, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+        source = PREAMBLE.format(root=str(ROOT), controller_n=0) + PONG_CONTROLLER
+        fd = theirs.fileno()
+        self.proc = subprocess.Popen(
+            [sys.executable, "-c", source, json.dumps(cores), str(fd), reference], pass_fds=(fd,)
+        )
+        theirs.close()
+        self._decode = decoder_for(MotorCommand)
+
+    def reset(self, msg) -> None:
+        from sfl_brain.messages import encode
+
+        self.sock.send(encode(msg))
+        self.sock.recv(65537)  # the Ack
+
+    def step(self, frame):
+        from sfl_brain.messages import encode
+
+        self.sock.send(encode(frame))
+        return self._decode(self.sock.recv(65537))
+
+    def close(self) -> None:
+        self.sock.send(b"stop")
+        self.proc.wait(timeout=10)
+        self.sock.close()
+
+
 COMMANDS = ("v_hip_l", "v_hip_r", "v_knee_l", "v_knee_r")
 
 

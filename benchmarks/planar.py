@@ -15,6 +15,9 @@ median of the ratios within each round. The load average is printed.
     them: placed as ``lockstep.pin_cpus`` ``--pin`` says (default ``auto``: both on one core), their
     frames and commands on their socket link (``lockstep.link: socket``); the trial is a request
     from this process, timed from request to reply;
+(c-hand) (c) without the framework: the trial run in this process, the reflex controller in a child process
+    on the pair's core, over a bare socket, the framework's messages written by hand (``_floor.HandLink``): no
+    host, no nonce, no checks; (c)/(c-hand) is what the framework's runtime costs;
 (c-zenoh) the pair placed as (c), its ticks on a Zenoh lowlatency session (``lockstep.link: zenoh``);
 (c-free) the pair not pinned (``pin_cpus: never``), the body polling up to ``--spin-us`` for
     each command (``lockstep.spin_us``), on the Zenoh link: the placement before issue 24;
@@ -67,6 +70,27 @@ REQUEST = TrialRequest(
 )
 BODY = "sfl_brain.bodies.planar_biped:PlanarBiped"
 CONTROLLER = "sfl_brain.modules.controllers.reflex:ReflexController"
+
+
+class ByHand:
+    """(c-hand): (c)'s trial run here, its controller in a child process on the pair's core over a bare socket with
+    the framework's messages written by hand (``_floor.HandLink``): (c) less the framework's runtime."""
+
+    def __init__(self, cores) -> None:
+        self.cores = cores
+        self.body = PlanarBiped()
+        self.body.link = self.link = _floor.HandLink(CONTROLLER, cores)
+
+    def trial(self) -> tuple[float, dict]:
+        with Pinned(self.cores):
+            t = time.perf_counter()
+            result = self.body.handle(REQUEST)
+            elapsed = time.perf_counter() - t
+        assert result.metrics["time"] >= 9.99, result
+        return elapsed, {"success": result.success, "quality": result.quality, **result.metrics}
+
+    def close(self) -> None:
+        self.link.close()
 
 
 def physics_tick():
@@ -171,6 +195,8 @@ def main() -> None:
         floors["socket"] = _floor.Pair("socket", 0, core, core, Path(folder))
         floors["shm"] = _floor.Pair("shm", 0, None, None, Path(folder))
         floors["zenoh"] = _floor.Pair("zenoh-tick", 0, core, core, Path(folder))
+        by_hand = ByHand(core)
+        assert by_hand.trial()[1] == one_process()[1]  # the same trial, bit for bit
         for pair in floors.values():
             pair.run(100, physics_tick())  # warm up
 
@@ -187,6 +213,8 @@ def main() -> None:
                             t0, before = one_process(PlanarBipedBefore)
                         assert metrics == before, (metrics, before)  # the same trial, bit for bit
                         into.setdefault("b0", []).append(t0)
+                elif name == "c-hand":
+                    t = by_hand.trial()[0]
                 elif name in hosted:
                     t = hosted[name].trial()
                 elif name in floors:
@@ -195,7 +223,8 @@ def main() -> None:
                     continue
                 into.setdefault(name, []).append(t)
 
-        everything = ["a", "b", "b0", "c", "c-zenoh", "c-free", "c-mesh", "c-apart", "pipe", "socket", "shm", "zenoh"]
+        everything = ["a", "b", "b0", "c", "c-hand", "c-zenoh", "c-free", "c-mesh", "c-apart"]
+        everything += ["pipe", "socket", "shm", "zenoh"]
         shuffle = np.random.default_rng(0).shuffle
         for _ in range(args.repeats):  # interleaved, so that all see the same machine load, in a shuffled order
             shuffle(everything)
@@ -203,7 +232,7 @@ def main() -> None:
         during = _floor.machine_load()
         neighbour = _floor.Busy()
         try:
-            besides = ["a", "b", "c", "c-zenoh", "socket", "zenoh", "shm"]
+            besides = ["a", "b", "c", "c-hand", "c-zenoh", "socket", "zenoh", "shm"]
             for _ in range(args.busy_repeats):
                 shuffle(besides)
                 round_(busy, besides)
@@ -211,7 +240,7 @@ def main() -> None:
             neighbour.close()
         beside = _floor.machine_load()
     finally:
-        for pair in [*hosted.values(), *floors.values()]:
+        for pair in [*hosted.values(), *floors.values(), *([by_hand] if "by_hand" in locals() else [])]:
             pair.close()
         session.close()
         shutil.rmtree(folder, ignore_errors=True)
@@ -233,6 +262,11 @@ def main() -> None:
     print(f"  (b0)/(b) = {ratio('b0', 'b'):.2f} (goal >= 1.6)   (b)/(a) = {ratio('b', 'a'):.2f} (goal <= 1.1)")
     print(f"  (c) controller + body over processes, socket link  {c * 1e3:7.1f} ms  ({10 / c:5.1f}x real time)")
     print(f"  (c)/(b) = {ratio('c', 'b'):.2f} (goal <= 1.45)")
+    print(
+        "  (c-hand) (c) without the framework: the reflex controller in a process on the same core, a bare socket, "
+        f"the messages by hand: (c-hand)/(b) = {ratio('c-hand', 'b'):.2f}; (c)/(c-hand) = {ratio('c', 'c-hand'):.2f} "
+        "(goal <= 1.10)"
+    )
     print(f"  (c-zenoh) placed as (c), ticks on a Zenoh lowlatency link: (c-zenoh)/(b) = {ratio('c-zenoh', 'b'):.2f}")
     print(
         f"  (c-free) not pinned, the body polling {args.spin_us:g} us, Zenoh link: (c-free)/(b) = "
@@ -255,7 +289,10 @@ def main() -> None:
         f"{ratio('c-zenoh', 'b') / ratio('zenoh', 'a'):.2f} (goal <= 1.10)"
     )
     print(f"beside one busy process, {args.busy_repeats} rounds ({beside}):")
-    print(f"  (c)/(b) = {ratio('c', 'b', busy):.2f} (goal <= 1.6); (c-zenoh)/(b) = {ratio('c-zenoh', 'b', busy):.2f}")
+    print(
+        f"  (c)/(b) = {ratio('c', 'b', busy):.2f} (goal <= 1.6); (c-hand)/(b) = {ratio('c-hand', 'b', busy):.2f}; "
+        f"(c-zenoh)/(b) = {ratio('c-zenoh', 'b', busy):.2f}"
+    )
     print(f"    socket, both blocking on {where}: {ratio('socket', 'a', busy):.2f}")
     print(f"    shared memory, both spinning, not pinned: {ratio('shm', 'a', busy):.2f}")
     print(f"    bare Zenoh, lockstep link, both blocking on {where}: {ratio('zenoh', 'a', busy):.2f}")

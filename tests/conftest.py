@@ -2,6 +2,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 import subprocess
 import sys
 import threading
@@ -12,6 +13,33 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"
+
+
+def pytest_xdist_auto_num_workers(config) -> int:
+    """``-n auto``: a worker per core this process may use (``taskset`` and container limits respected), not per
+    core the machine has."""
+    from sfl_brain.placement import usable_cpus
+
+    return len(usable_cpus()) or os.cpu_count() or 1
+
+
+def pytest_configure(config) -> None:
+    """Under pytest-xdist (``-n N``, the default ``-n auto`` in pyproject.toml), worker ``i`` of ``N`` runs on its
+    own share of the usable cores (``cores[i::N]``), and so does every process its tests start (they inherit it).
+
+    A run places its body and controller on one of the cores it may use (``lockstep.pin_cpus: auto``): without
+    shares, two workers' runs would pin their pairs to the same last core and leave the other idle, and a body
+    starved there can miss its 1-s liveliness lease. With shares, each worker's runs see the cores of its share
+    only, as under ``taskset``, which the framework respects."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "")
+    count = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    if not worker.startswith("gw") or count < 2 or not hasattr(os, "sched_setaffinity"):
+        return
+    from sfl_brain.placement import pin, usable_cpus
+
+    cores = usable_cpus()
+    if len(cores) >= count:
+        pin(cores[int(worker[2:]) :: count])
 
 
 def sfl(*args: str, timeout: float = 300, **kw) -> subprocess.CompletedProcess:

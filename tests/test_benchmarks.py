@@ -50,6 +50,8 @@ def test_planar_benchmark_prints_the_trial_ratios_beside_the_floors_and_the_swee
     assert "load average" in out
     figures(out, r"\(c\)/\(b\) = ([\d.]+)", count=2)  # alone, and beside one busy process
     figures(out, r"\(c-zenoh\)/\(b\) = ([\d.]+)", count=2)  # the ticks on a Zenoh link, the same two ways
+    figures(out, r"\(c-hand\)/\(b\) = ([\d.]+)", count=2)  # the same without the framework, the same two ways
+    figures(out, r"\(c\)/\(c-hand\) = ([\d.]+)")  # what the framework's runtime costs
     figures(out, r"\(b0\)/\(b\) = ([\d.]+)")  # the body before batching, measured beside it
     figures(out, r"\((?:c-free|c-mesh|c-apart)\)/\(b\) = ([\d.]+)", count=3)
     # the floors, the last two also beside one busy process
