@@ -499,7 +499,8 @@ class Host:
         self._publishers: dict[str, Any] = {}
         self._lock = threading.Lock()  # the module sees one message at a time
         self._stopping = False
-        self.link: BusLink | None = None  # a body's link to its controller in another process
+        self._stop_asked = False  # stop() was called: the main loop leaves before the next request
+        self.link: TickLink | None = None  # a body's link to its controller in another process
         self.ticks: zenoh.Session | None = None  # the lockstep link of a body worker or its controller process
         self.seal = bus.Seal(spec.get("secret"))
         self.drops = bus.Drops(log, self.instance)
@@ -511,7 +512,10 @@ class Host:
         self.run_dir = Path(spec["run_dir"]) if spec.get("run_dir") else None
 
     def stop(self) -> None:
-        """Leave the main loop; a trial in progress is interrupted at its next tick (from any thread)."""
+        """Leave the main loop; a trial in progress is interrupted at its next tick (from any thread). Requests
+        still queued are not answered: a flood of them (garbage on the bus) must not hold the exit back past the
+        supervisor's grace, after which it kills the process before it writes its counters."""
+        self._stop_asked = True
         self.inbox.put(STOP)
         if self.link is not None:
             self.link.interrupt()
@@ -673,7 +677,7 @@ class Host:
                 item = inbox.get(timeout=1.0)
             except queue.Empty:
                 continue
-            if item is STOP:
+            if item is STOP or self._stop_asked:
                 return
             with self._lock:
                 self._answer(item)
