@@ -297,4 +297,6 @@ class Drops:
             )
 
     def write(self, path: Path) -> None:
-        path.write_text(json.dumps({"dropped": dict(self.counts)}, indent=1) + "\n")
+        with self._lock:  # from any thread, while others count
+            counts = dict(self.counts)
+        path.write_text(json.dumps({"dropped": counts}, indent=1) + "\n")

@@ -517,6 +517,9 @@ class Host:
         supervisor's grace, after which it kills the process before it writes its counters."""
         self._stop_asked = True
         self.inbox.put(STOP)
+        # the counts so far, at once: the main thread may be held up (a reply to a peer that reads slowly), and a
+        # host that does not exit within the supervisor's grace is killed before it writes them at its end
+        self.write_counters()
         if self.link is not None:
             self.link.interrupt()
 

@@ -9,6 +9,7 @@ supervisor's queue; nothing else here runs in the background. Nothing here impor
 from __future__ import annotations
 
 import json
+import logging
 import os
 import signal
 import subprocess
@@ -20,6 +21,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .scenario import Instance
+
+log = logging.getLogger("sfl.processes")
 
 
 @dataclass
@@ -85,15 +88,16 @@ def stop_all(children: Iterable[Child], grace: float = 3.0) -> None:
                 child.proc.send_signal(signal.SIGTERM)
             except ProcessLookupError:
                 pass
-            procs.append(child.proc)
+            procs.append((child, child.proc))
     deadline = time.monotonic() + grace
-    for proc in procs:
+    for child, proc in procs:
         try:
             proc.wait(timeout=max(0.0, deadline - time.monotonic()))
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
-    for proc in procs:
+            log.warning("module `%s` did not exit within %g s of SIGTERM: killed", child.name, grace)
+    for _, proc in procs:
         if proc.stdin:
             try:
                 proc.stdin.close()

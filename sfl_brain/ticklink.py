@@ -6,12 +6,13 @@ command out, command in), and the hand-over is most of its cost. Over a Zenoh se
 wakes Zenoh's receiving thread, which then wakes the Python thread that waits for it: four wake-ups
 a tick where a socket read by the waiting thread itself takes two. Measured side by side on this
 project's 2-core VM (``benchmarks/bus.py``, ``benchmarks/planar.py``, ``docs/results/benchmarks.md``),
-two processes taking turns on one core cost 1.03-1.16x one process over a pipe and 1.7-2.0x over
-Zenoh's lowlatency transport. So, as dora-rs carries the messages of nodes on one machine over
-shared memory and uses Zenoh between machines, the per-tick frames and commands of a pair on one
-machine take this socket, and everything else (requests, replies, liveliness, the run secret's
-checks, workers on other machines) stays on the run's Zenoh mesh. ``lockstep.link: zenoh`` puts
-the ticks back on a Zenoh session of their own (:func:`sfl_brain.bus.open_tick_session`).
+two processes taking turns on one core cost 1.08-1.28x one process over a pipe or this socket and
+1.8-2.0x over Zenoh's lowlatency transport. So, as dora-rs nodes reach their daemon over shared
+memory or a local socket and daemons on other machines talk over Zenoh, the per-tick frames and
+commands of a pair on one machine take this socket, and everything else (requests, replies,
+liveliness, the run secret's checks, workers on other machines) stays on the run's Zenoh mesh.
+``lockstep.link: zenoh`` puts the ticks back on a Zenoh session of their own
+(:func:`sfl_brain.bus.open_tick_session`).
 
 The socket is ``SOCK_SEQPACKET`` (a message is read whole, in order, connection-oriented: the end of
 the other process is seen at once as end of file). It lives in a folder only this user may enter
