@@ -281,6 +281,7 @@ class Drops:
         self.counts: dict[str, int] = {}
         self._logged: set[tuple[str, str]] = set()
         self._lock = threading.Lock()
+        self._write_lock = threading.Lock()
 
     def __call__(self, reason: str, what: str, detail: str = "") -> None:
         with self._lock:
@@ -297,6 +298,10 @@ class Drops:
             )
 
     def write(self, path: Path) -> None:
-        with self._lock:  # from any thread, while others count
-            counts = dict(self.counts)
-        path.write_text(json.dumps({"dropped": counts}, indent=1) + "\n")
+        """Write the counts to ``path`` (whole: a temporary file, then renamed), from any thread."""
+        with self._write_lock:  # two writers (a stop, the end) never interleave, and the last counts land last
+            with self._lock:
+                counts = dict(self.counts)
+            tmp = path.with_name(path.name + ".tmp")
+            tmp.write_text(json.dumps({"dropped": counts}, indent=1) + "\n")
+            os.replace(tmp, path)

@@ -369,8 +369,9 @@ class SocketLink(TickLink):
 
     def step(self, frame: SensorFrame) -> MotorCommand:
         clock, channel = time.perf_counter, self.channel
-        if not self._stopping:
-            self._abort = None
+        if self._stopping:  # interrupt() sets it before it wakes: a wake that found no socket is not lost
+            raise LinkError("interrupted: the body worker is stopping")
+        self._abort = None
         nonce = self.nonce
         try:
             channel.send(encode(frame) + nonce)
@@ -383,7 +384,12 @@ class SocketLink(TickLink):
                     while (data := channel.try_recv()) is None and clock() < deadline:
                         pass
                     spin = False
-                command = check_command(data if data is not None else channel.recv(), frame, nonce, self.drops)
+                if data is None:
+                    data = channel.recv()
+                if len(data) > ticklink.MAX_MESSAGE:
+                    self.drops("malformed", "command", f"over {ticklink.MAX_MESSAGE} B")
+                    continue
+                command = check_command(data, frame, nonce, self.drops)
                 if command is not None:
                     return command
         except ticklink.LinkClosed:
@@ -517,11 +523,11 @@ class Host:
         supervisor's grace, after which it kills the process before it writes its counters."""
         self._stop_asked = True
         self.inbox.put(STOP)
+        if self.link is not None:
+            self.link.interrupt()
         # the counts so far, at once: the main thread may be held up (a reply to a peer that reads slowly), and a
         # host that does not exit within the supervisor's grace is killed before it writes them at its end
         self.write_counters()
-        if self.link is not None:
-            self.link.interrupt()
 
     # callbacks only enqueue; the main loop does the work
     def _enqueue(self, item) -> None:
@@ -549,8 +555,9 @@ class Host:
             ends = [f"listening on {e}" for e in tick.get("listen", [])] + [
                 f"connecting to {e}" for e in tick.get("connect", [])
             ]
-            ends_named = (*tick.get("listen", []), *tick.get("connect", []))
-            socket_end = next((e for e in ends_named if ticklink.is_socket(e)), None)
+            listen_end = next((e for e in tick.get("listen", []) if ticklink.is_socket(e)), None)
+            connect_end = next((e for e in tick.get("connect", []) if ticklink.is_socket(e)), None)
+            socket_end = listen_end or connect_end
             if socket_end is not None:  # lockstep.link: socket (sfl_brain.ticklink)
                 log.info("lockstep link (socket): %s", ", ".join(ends))
             elif tick:  # lockstep.link: zenoh
@@ -576,7 +583,7 @@ class Host:
                     )
                     sinks.append(controller.telemetry)
                     self.module.link = InProcessLink(controller)
-                elif self.module.COMMANDS and socket_end is not None:
+                elif self.module.COMMANDS and connect_end is not None:
                     self.link = SocketLink(
                         self.session,
                         self.run_id,
@@ -584,7 +591,7 @@ class Host:
                         spec["routes"][SensorFrame.TAG],
                         spec["tick_timeout"],
                         spec.get("spin", 0.0),
-                        endpoint=socket_end,
+                        endpoint=connect_end,
                         secret=spec.get("secret"),
                         drops=self.drops,
                     )
@@ -604,12 +611,12 @@ class Host:
                     self.module.link = self.link
             for message_type in type(self.module).handles:
                 key_expr = bus.key(self.run_id, self.instance, message_type.TAG)
-                if message_type.STREAM and socket_end is not None:  # a thread per connection blocks in recv()
+                if message_type.STREAM and listen_end is not None:  # a thread per connection blocks in recv()
                     if server is not None:
                         raise ValueError(f"{self.instance}: a socket lockstep link carries one stream message type")
                     answer = functools.partial(self._stream_answer, message_type, decoder_for(message_type))
                     server = ticklink.Server(
-                        socket_end,
+                        listen_end,
                         answer,
                         on_refused=lambda: self.drops("foreign", "lockstep connection", "too many connections"),
                         on_oversized=lambda n, t=message_type.TAG: self.drops("malformed", f"{t} frame", f"{n} B"),
@@ -681,6 +688,7 @@ class Host:
             except queue.Empty:
                 continue
             if item is STOP or self._stop_asked:
+                self._drop_queued(item)
                 return
             with self._lock:
                 self._answer(item)
@@ -688,6 +696,16 @@ class Host:
                     self.module.run_deferred()
                 except Exception:
                     log.exception("%s: deferred work failed", self.instance)
+
+    def _drop_queued(self, item) -> None:
+        """Let go of the requests still queued at stop, unanswered (their queriers learn at once that nobody will)."""
+        while True:
+            if item is not STOP:
+                item.drop()
+            try:
+                item = self.inbox.get_nowait()
+            except queue.Empty:
+                return
 
     def _fresh(self, nonce: bytes) -> bool:
         """False for a request nonce seen before (a replay)."""
@@ -752,34 +770,36 @@ class Host:
     def _stream_answer(self, message_type: type[Message], decode_stream, data: bytes) -> bytes | None:
         """The reply to one lockstep stream message (encoded, with the trial's nonce), or None: check the
         trial's nonce, decode, check trial and tick, handle. What fails is dropped and counted."""
-        drops = self.drops
-        stream = self._stream
-        if stream is None or data[-8:] != stream[0]:
-            drops("foreign", f"{message_type.TAG} frame", "not the current trial's stream nonce")
-            return None
+        drops, why = self.drops, ""
         try:
             msg = decode_stream(data[:-8])
         except (MessageError, NonFiniteError) as exc:  # a body checks its own sensors: not from it
-            drops("malformed", f"{message_type.TAG} frame", str(exc))
-            return None
-        if type(msg) is not message_type:
-            drops("malformed", f"{message_type.TAG} frame", f"a {getattr(msg, 'TAG', msg)}")
-            return None
-        tick = getattr(msg, "tick", None)
-        if tick is not None and (msg.trial_id != stream[1] or tick != stream[2]):
-            drops(
-                "stale",
-                f"{message_type.TAG} frame",
-                f"trial {msg.trial_id} tick {tick} while expecting trial {stream[1]} tick {stream[2]}",
-            )
-            return None
-        stream[2] += 1
-        try:
-            with self._lock:
+            msg, why = None, str(exc)
+        with self._lock:  # the checks and the handler see one stream: a reset cannot come in between
+            stream = self._stream
+            if stream is None or data[-8:] != stream[0]:
+                drops("foreign", f"{message_type.TAG} frame", "not the current trial's stream nonce")
+                return None
+            if msg is None:
+                drops("malformed", f"{message_type.TAG} frame", why)
+                return None
+            if type(msg) is not message_type:
+                drops("malformed", f"{message_type.TAG} frame", f"a {getattr(msg, 'TAG', msg)}")
+                return None
+            tick = getattr(msg, "tick", None)
+            if tick is not None and (msg.trial_id != stream[1] or tick != stream[2]):
+                drops(
+                    "stale",
+                    f"{message_type.TAG} frame",
+                    f"trial {msg.trial_id} tick {tick} while expecting trial {stream[1]} tick {stream[2]}",
+                )
+                return None
+            stream[2] += 1
+            try:
                 reply = self.module.handle(msg, checked=True)  # decoded: checked by the codec
-        except Exception:
-            log.exception("%s: error handling a stream message", self.instance)
-            return None
+            except Exception:
+                log.exception("%s: error handling a stream message", self.instance)
+                return None
         if reply is None:
             return None
         self._reply_tags[message_type.TAG] = reply.TAG

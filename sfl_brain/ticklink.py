@@ -6,7 +6,7 @@ command out, command in), and the hand-over is most of its cost. Over a Zenoh se
 wakes Zenoh's receiving thread, which then wakes the Python thread that waits for it: four wake-ups
 a tick where a socket read by the waiting thread itself takes two. Measured side by side on this
 project's 2-core VM (``benchmarks/bus.py``, ``benchmarks/planar.py``, ``docs/results/benchmarks.md``),
-two processes taking turns on one core cost 1.08-1.28x one process over a pipe or this socket and
+two processes taking turns on one core cost 1.08-1.35x one process over a pipe or this socket and
 1.8-2.0x over Zenoh's lowlatency transport. So, as dora-rs nodes reach their daemon over shared
 memory or a local socket and daemons on other machines talk over Zenoh, the per-tick frames and
 commands of a pair on one machine take this socket, and everything else (requests, replies,
@@ -31,6 +31,7 @@ from __future__ import annotations
 import logging
 import os
 import socket
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -44,7 +45,7 @@ SCHEME = "seqpacket/"
 #: the largest tick message (a frame or a command with its nonce); a longer one is dropped as malformed
 MAX_MESSAGE = 65536
 
-#: connections a controller's end serves at once (its body's, and at most a few strangers' of this user)
+#: connections a controller's end serves at once (its body's, and a few of other processes of this user: see Server)
 MAX_CONNECTIONS = 8
 
 #: how often a connecting end tries again while the listening end is not there yet (a restart)
@@ -52,8 +53,10 @@ RETRY_S = 0.01
 
 
 def available() -> bool:
-    """True where a socket link can be made: Unix sockets with ``SOCK_SEQPACKET`` (Linux)."""
-    if not hasattr(socket, "AF_UNIX") or not hasattr(socket, "SOCK_SEQPACKET"):
+    """True where a socket link can be made: Linux, whose Unix sockets have ``SOCK_SEQPACKET`` and whose
+    ``shutdown`` wakes a thread blocked in ``accept`` or ``recv`` (what :meth:`Server.close` and
+    :meth:`Channel.wake` rely on; not checked elsewhere)."""
+    if not sys.platform.startswith("linux") or not hasattr(socket, "SOCK_SEQPACKET"):
         return False
     try:
         socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET).close()
@@ -97,14 +100,18 @@ class Channel:
         deadline = time.monotonic() + timeout
         while not stopping():
             sock = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+            # a full backlog (a controller that does not accept: stopped, or hung holding the GIL) would block
+            # connect() for good: it gets the time left, and counts as not listening
+            sock.settimeout(max(deadline - time.monotonic(), RETRY_S))
             try:
                 sock.connect(self.path)
-            except (FileNotFoundError, ConnectionRefusedError):
+            except (FileNotFoundError, ConnectionRefusedError, TimeoutError, BlockingIOError):
                 sock.close()
                 if time.monotonic() >= deadline:
                     return False
                 time.sleep(RETRY_S)
                 continue
+            sock.settimeout(None)
             with self._lock:
                 self.sock = sock
             return True
@@ -121,6 +128,11 @@ class Channel:
         return True
 
     def send(self, data: bytes) -> None:
+        if len(data) > MAX_MESSAGE:
+            raise ValueError(
+                f"a lockstep message of {len(data)} B is over the socket link's {MAX_MESSAGE} B: "
+                "fewer sensors, or the controller in the body worker (colocate: true)"
+            )
         try:
             self.sock.send(data)  # type: ignore[union-attr]
         except (OSError, AttributeError):
@@ -139,7 +151,7 @@ class Channel:
         if not data:
             self.close()
             raise LinkClosed("the link is closed")
-        return data
+        return data  # over MAX_MESSAGE: cut short, and then refused by the caller's checks (no nonce at its end)
 
     def try_recv(self) -> bytes | None:
         """The next message if one is there (None if not); raises LinkClosed as :meth:`recv`."""
@@ -166,8 +178,14 @@ class Channel:
 class Server:
     """The controller's end: listens on the socket and answers every message of every connection
     with ``answer(data)`` (bytes to send back, or None), one thread per connection, blocking in
-    ``recv``. A connection beyond :data:`MAX_CONNECTIONS` is closed at once and counted by
-    ``on_refused``; a message over :data:`MAX_MESSAGE` bytes goes to ``on_oversized``."""
+    ``recv``. A message over :data:`MAX_MESSAGE` bytes goes to ``on_oversized``.
+
+    At most :data:`MAX_CONNECTIONS` connections are served at once. A connection proves itself by a
+    message that ``answer`` replies to (a frame with the trial's nonce: only the body has it). When
+    all slots are taken, a new connection closes the oldest one that has not proved itself (counted
+    by ``on_refused``): idle connections of another process of this user cannot lock the body out,
+    whose connection is new at each restart or reconnect. Only when every slot has proved itself is
+    the new one refused."""
 
     def __init__(
         self,
@@ -190,7 +208,7 @@ class Server:
         self.listener.listen(MAX_CONNECTIONS)
         self._closing = False
         self._lock = threading.Lock()
-        self._connections: set[socket.socket] = set()
+        self._connections: dict[socket.socket, bool] = {}  # in the order they came; True: proved itself
         self._threads: list[threading.Thread] = []
         self._acceptor = threading.Thread(target=self._accept, name="ticklink-accept", daemon=True)
         self._acceptor.start()
@@ -201,21 +219,38 @@ class Server:
                 conn, _ = self.listener.accept()
             except OSError:  # closed (shutdown wakes accept with EINVAL)
                 return
-            with self._lock:
-                if self._closing:
+            try:
+                self._admit(conn)
+            except Exception:  # never die silently: later connections would wait in the backlog for good
+                log.exception("lockstep link %s: could not serve a connection", self.path)
+                conn.close()
+            if self._closing:
+                return
+
+    def _admit(self, conn: socket.socket) -> None:
+        with self._lock:
+            if self._closing:
+                conn.close()
+                return
+            if len(self._connections) >= MAX_CONNECTIONS:
+                unproven = next((c for c, proved in self._connections.items() if not proved), None)
+                self.on_refused()
+                if unproven is None:
                     conn.close()
                     return
-                if len(self._connections) >= MAX_CONNECTIONS:
-                    conn.close()
-                    self.on_refused()
-                    continue
-                self._connections.add(conn)
-                thread = threading.Thread(target=self._serve, args=(conn,), name="ticklink-serve", daemon=True)
-                self._threads = [t for t in self._threads if t.is_alive()] + [thread]
-            thread.start()
+                del self._connections[unproven]
+                try:
+                    unproven.shutdown(socket.SHUT_RDWR)  # its thread returns and closes it
+                except OSError:
+                    pass
+            self._connections[conn] = False
+            thread = threading.Thread(target=self._serve, args=(conn,), name="ticklink-serve", daemon=True)
+            self._threads = [t for t in self._threads if t.is_alive()] + [thread]
+        thread.start()
 
     def _serve(self, conn: socket.socket) -> None:
         recv, send, answer, limit = conn.recv, conn.send, self.answer, MAX_MESSAGE
+        proved = False
         try:
             while True:
                 try:
@@ -233,9 +268,14 @@ class Server:
                         send(reply)
                     except OSError:
                         return
+                    if not proved:
+                        proved = True
+                        with self._lock:
+                            if conn in self._connections:
+                                self._connections[conn] = True
         finally:
             with self._lock:
-                self._connections.discard(conn)
+                self._connections.pop(conn, None)
             conn.close()
 
     def close(self, timeout: float = 2.0) -> None:

@@ -38,8 +38,27 @@ def pytest_configure(config) -> None:
     from sfl_brain.placement import pin, usable_cpus
 
     cores = usable_cpus()
+    os.environ.setdefault(ALL_CORES, ",".join(map(str, cores)))
     if len(cores) >= count:
-        pin(cores[int(worker[2:]) :: count])
+        pin(cores[int(worker[2:]) % count :: count])  # a worker that replaces a crashed one is gw<count> or more
+
+
+#: the cores the test session may use, before each xdist worker was pinned to its share
+ALL_CORES = "SFL_TEST_ALL_CORES"
+
+
+def all_cores() -> list[int]:
+    """The cores the whole test session may use (a worker's own share is ``usable_cpus()``)."""
+    from sfl_brain.placement import usable_cpus
+
+    saved = os.environ.get(ALL_CORES)
+    return [int(c) for c in saved.split(",")] if saved else usable_cpus()
+
+
+def on_all_cores() -> None:
+    """A ``preexec_fn``: the child runs on every core of the test session, not on its worker's share (a test of
+    how a run places its processes on the cores it may use)."""
+    os.sched_setaffinity(0, all_cores())
 
 
 def sfl(*args: str, timeout: float = 300, **kw) -> subprocess.CompletedProcess:

@@ -12,7 +12,7 @@ from sfl_brain.placement import Pair, place, usable_cpus
 from sfl_brain.records import read_records
 from sfl_brain.scenario import load
 
-from .conftest import SCENARIOS, sfl_run
+from .conftest import SCENARIOS, all_cores, on_all_cores, sfl_run
 
 QUICK = SCENARIOS / "quickstart.yaml"
 SETS = ("protocol.trials=6", "record.body_every=0", "modules.body.params.duration=3")
@@ -30,18 +30,20 @@ def logs(out) -> dict[str, str]:
 @pytest.mark.parametrize("link", ["socket", "zenoh"])
 def test_a_run_pins_its_pair_to_one_core_logs_it_and_ticks_on_its_lockstep_link(tmp_path, link):
     out = tmp_path / "run"
-    done = sfl_run(QUICK, out, *SETS, f"lockstep.link={link}")
+    # on every core of the machine, also under pytest-xdist (whose workers each have a core of their own)
+    done = sfl_run(QUICK, out, *SETS, f"lockstep.link={link}", preexec_fn=on_all_cores)
     assert done.returncode == 0, done.stderr
-    expected = place([Pair("body", "controller")], ["acc", "vigilance", "ofc"], usable_cpus(), "auto")
+    machine = all_cores()
+    expected = place([Pair("body", "controller")], ["acc", "vigilance", "ofc"], machine, "auto")
     assert f"sfl: {expected.describe()}" in done.stdout.splitlines()  # the line a user sees
     placed = json.loads((out / "logs" / "placement.json").read_text())
     assert placed["cores"] == {name: list(cores) for name, cores in expected.cores.items()}
-    assert placed["mode"] == "auto" and placed["usable_cores"] == usable_cpus()
+    assert placed["mode"] == "auto" and placed["usable_cores"] == machine
     text = logs(out)
-    if len(usable_cpus()) >= 2:  # as the OS says: both on the last usable core, the brain modules elsewhere
-        core = usable_cpus()[-1]
-        assert f"pinned to cores [{core}]" in text["body"] and f"pinned to cores [{core}]" in text["controller"]
-        assert f"pinned to cores {usable_cpus()[:-1]}" in text["acc"]
+    if len(machine) >= 2:  # as the OS says: both on the last usable core, the brain modules elsewhere
+        pair_core = f"pinned to cores [{machine[-1]}]"
+        assert pair_core in text["body"] and pair_core in text["controller"]
+        assert f"pinned to cores {machine[:-1]}" in text["acc"]
     # the frames and commands went over the pair's own link: the controller listens, the body connects
     endpoint = placed["lockstep_links"]["controller"]["listen"][0]
     scheme, kind = {"socket": ("seqpacket/", "socket"), "zenoh": ("unixsock-stream/", "lowlatency")}[link]
@@ -190,3 +192,43 @@ def test_on_its_socket_link_the_body_takes_only_its_trials_command_and_a_dead_co
         link.close()
         queryable.undeclare()
         mesh.close()
+
+
+def test_idle_connections_of_another_process_cannot_lock_the_body_out_of_its_controllers_socket(tmp_path):
+    """A process of this user that fills the controller's connection slots with idle connections gives way: a new
+    connection closes the oldest one that never carried a frame the controller answered, so the body, which
+    connects anew after each restart, still gets its commands; the slots it took are counted."""
+    import socket
+
+    from sfl_brain import ticklink
+
+    endpoint = ticklink.endpoint(tmp_path, "0")
+    refused = []
+    server = ticklink.Server(
+        endpoint, lambda data: b"command" if data == b"frame" else None, on_refused=lambda: refused.append(1)
+    )
+    strangers = []
+    body = ticklink.Channel(endpoint)
+    try:
+        for _ in range(ticklink.MAX_CONNECTIONS):  # every slot taken, and nothing sent
+            stranger = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+            stranger.connect(ticklink.path_of(endpoint))
+            strangers.append(stranger)
+        assert body.connect(timeout=5.0)
+        body.send(b"frame")
+        assert body.recv() == b"command"
+        assert refused == [1]
+        strangers[0].settimeout(5.0)
+        assert strangers[0].recv(16) == b""  # the oldest idle one was closed
+        # a proven connection keeps its slot: more strangers close idle ones, never the body's
+        for _ in range(ticklink.MAX_CONNECTIONS):
+            stranger = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+            stranger.connect(ticklink.path_of(endpoint))
+            strangers.append(stranger)
+        body.send(b"frame")
+        assert body.recv() == b"command"
+    finally:
+        body.close()
+        for stranger in strangers:
+            stranger.close()
+        server.close()
