@@ -37,8 +37,11 @@ import zenoh
 
 from .status import EnvironmentProblem
 
-#: keep-alive lease: a silent peer is declared gone after this many ms
-LEASE_MS = 1000
+#: keep-alive lease: a silent peer is declared gone after this many ms. A module whose process exits is seen at
+#: once (its exit, its closed sockets); the lease only finds one that hangs, or a worker on another machine. 1 s
+#: was too short on a loaded machine: a module that had just started on a core shared with a run's busy loop
+#: (one core per test worker, thousands of ACC decisions) lost its link and was killed as silent.
+LEASE_MS = 3000
 
 #: Zenoh's async runtimes (``ZENOH_RUNTIME``, RON): all handed over to the transmit runtime's one
 #: worker thread, instead of 2 receive workers and a thread each for transmit, accept, network and

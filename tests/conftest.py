@@ -29,7 +29,7 @@ def pytest_configure(config) -> None:
 
     A run places its body and controller on one of the cores it may use (``lockstep.pin_cpus: auto``): without
     shares, two workers' runs would pin their pairs to the same last core and leave the other idle, and a body
-    starved there can miss its 1-s liveliness lease. With shares, each worker's runs see the cores of its share
+    starved there can miss its liveliness lease. With shares, each worker's runs see the cores of its share
     only, as under ``taskset``, which the framework respects."""
     worker = os.environ.get("PYTEST_XDIST_WORKER", "")
     count = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
