@@ -45,8 +45,9 @@ def test_bus_benchmark_prints_the_floors_bare_zenoh_and_the_framework_side_by_si
     figures(out, r"first trial done ([\d.]+) s", count=2)  # placed and not
 
 
-def test_planar_benchmark_prints_the_trial_ratios_beside_the_floors_and_the_sweep_speed_ups():
-    out = bench("planar.py", "--repeats", "1", "--busy-repeats", "1", "--grid", "2")
+def test_planar_benchmark_prints_the_trial_ratios_beside_the_floors():
+    # the sweeps are whole `sfl run`s of the sweep protocol (tests/test_e2e.py runs one over two workers): skipped here
+    out = bench("planar.py", "--repeats", "1", "--busy-repeats", "1", "--no-sweep")
     assert "load average" in out
     figures(out, r"\(c\)/\(b\) = ([\d.]+)", count=2)  # alone, and beside one busy process
     figures(out, r"\(c-zenoh\)/\(b\) = ([\d.]+)", count=2)  # the ticks on a Zenoh link, the same two ways
@@ -62,7 +63,6 @@ def test_planar_benchmark_prints_the_trial_ratios_beside_the_floors_and_the_swee
     figures(out, r"    bare Zenoh, lockstep link[^:\n]*: ([\d.]+)", count=2)
     figures(out, r"socket link \(\(c\)/\(b\)\) / \(socket/\(a\)\) ([\d.]+)")
     figures(out, r"Zenoh link \(\(c-zenoh\)/\(b\)\) / \(bare Zenoh/\(a\)\) ([\d.]+)")
-    figures(out, r"speed-up ([\d.]+)x", count=2)
 
 
 def test_humanoid_benchmark_prints_the_trial_over_processes_against_one_process():

@@ -24,7 +24,7 @@ def test_a_study_on_a_dask_cluster_brings_every_run_folder_back(tmp_path):
             "--vary",
             "modules.vigilance.params.value=0,-0.3",
             "--seeds",
-            "0,1",
+            "0",
             "--set",
             "protocol.trials=30",
             "--out",
@@ -38,13 +38,13 @@ def test_a_study_on_a_dask_cluster_brings_every_run_folder_back(tmp_path):
         done = sfl(*command, timeout=240)
         assert done.returncode == 0, done.stderr
         assert "2 workers, 2 threads" in done.stdout
-        for name in ("value0_seed0", "value0_seed1", "value-0.3_seed0", "value-0.3_seed1"):
+        for name in ("value0_seed0", "value-0.3_seed0"):  # one run for each of the two workers
             assert json.loads((out / name / "summary.json").read_text())["status"] == "completed"
             assert (out / name / "records.jsonl").read_bytes().count(b'"kind":"trial"') == 30
             assert (out / name / "recording.rrd").stat().st_size > 10_000
             assert f"{name} started on " in done.stderr and " tcp://127.0.0.1:" in done.stderr
         page = (out / "report" / "README.md").read_text()
-        assert "| value=0 | 2 |" in page and "| value=-0.3 | 2 |" in page
+        assert "| value=0 | 1 |" in page and "| value=-0.3 | 1 |" in page
         # again: every run is kept, nothing is sent to the cluster
         before = {p: p.stat().st_mtime_ns for p in out.glob("value*/summary.json")}
         again = sfl(*command, timeout=120)
