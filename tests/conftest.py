@@ -79,6 +79,20 @@ def sfl_run(scenario, out, *sets: str, extra: tuple[str, ...] = (), **kw) -> sub
     return sfl("run", str(scenario), *settings, *extra, "--out", str(out), "--quiet", **kw)
 
 
+def start_sfl_run(scenario, out, *sets: str, **kw) -> subprocess.Popen:
+    """``sfl run SCENARIO --set S... --out OUT --quiet`` in the background, its output on text pipes (``kw``: more
+    ``Popen`` arguments, e.g. ``start_new_session=True`` for a process group a signal can reach as a whole)."""
+    settings = [arg for s in sets for arg in ("--set", s)]
+    return subprocess.Popen(
+        [sys.executable, "-m", "sfl_brain.cli", "run", str(scenario), *settings, "--out", str(out), "--quiet"],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        **kw,
+    )
+
+
 @pytest.fixture
 def write_scenario(tmp_path):
     def write(text: str, name: str = "scenario.yaml") -> Path:

@@ -17,7 +17,7 @@ from sfl_brain.local import run_local
 from sfl_brain.records import read_records
 from sfl_brain.scenario import load
 
-from .conftest import ROOT, SCENARIOS, Lines, joined_run, sfl, sfl_run, wait_for_trials
+from .conftest import ROOT, SCENARIOS, Lines, joined_run, sfl, sfl_run, start_sfl_run, wait_for_trials
 
 VOLATILE = {"wall_ms", "worker"}
 
@@ -135,16 +135,6 @@ def test_dead_module_without_restart_is_reported_and_records_survive(tmp_path):
     assert json.loads(sfl("inspect", str(out), "--json").stdout)["trials"] == 5
 
 
-def _start(args, tmp_path):
-    return subprocess.Popen(
-        [sys.executable, "-m", "sfl_brain.cli", "run", *args],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-
-
 def test_garbage_on_the_bus_is_logged_and_dropped(tmp_path):
     out = tmp_path / "run"
     with joined_run(SCENARIOS / "analytic_learn.yaml", out, "protocol.trials=400", modules=4) as (
@@ -171,10 +161,7 @@ def test_garbage_on_the_bus_is_logged_and_dropped(tmp_path):
 def _long_walker_run(tmp_path, trials_seen):
     """``sfl run`` of the walker with an endless budget, once ``trials_seen`` trials are recorded."""
     out = tmp_path / "run"
-    proc = _start(
-        [str(SCENARIOS / "quickstart.yaml"), "--set", "protocol.trials=100000", "--out", str(out), "--quiet"],
-        tmp_path,
-    )
+    proc = start_sfl_run(SCENARIOS / "quickstart.yaml", out, "protocol.trials=100000")
     wait_for_trials(out, trials_seen, proc)
     return proc, out, out / "records.jsonl", psutil.Process(proc.pid).children(recursive=True)
 

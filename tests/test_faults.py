@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 
 import psutil
 import pytest
@@ -13,7 +12,7 @@ from sfl_brain.local import run_local
 from sfl_brain.records import read_records
 from sfl_brain.scenario import load
 
-from .conftest import ROOT, SCENARIOS, wait_for_trials
+from .conftest import SCENARIOS, start_sfl_run, wait_for_trials
 
 VOLATILE = {"wall_ms", "worker"}
 WALKER = SCENARIOS / "quickstart.yaml"
@@ -21,17 +20,6 @@ WALKER = SCENARIOS / "quickstart.yaml"
 
 def stable(rows):
     return [{k: v for k, v in r.items() if k not in VOLATILE} for r in rows]
-
-
-def start(scenario, out, *sets):
-    args = [arg for s in sets for arg in ("--set", s)]
-    return subprocess.Popen(
-        [sys.executable, "-m", "sfl_brain.cli", "run", str(scenario), *args, "--out", str(out), "--quiet"],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
 
 
 def module_process(proc: subprocess.Popen, name: str) -> psutil.Process:
@@ -51,7 +39,7 @@ def module_process(proc: subprocess.Popen, name: str) -> psutil.Process:
 @pytest.mark.parametrize("name", ["acc", "vigilance", "ofc"])
 def test_kill_9_of_a_brain_module_fails_the_run_naming_it(tmp_path, name):
     out = tmp_path / "run"
-    proc = start(SCENARIOS / "analytic_learn.yaml", out, "protocol.trials=100000")
+    proc = start_sfl_run(SCENARIOS / "analytic_learn.yaml", out, "protocol.trials=100000")
     wait_for_trials(out, 3, proc, timeout=60)
     module_process(proc, name).kill()
     _, stderr = proc.communicate(timeout=60)
@@ -79,7 +67,7 @@ def test_kill_9_of_a_body_or_controller_restarts_it_and_retries_the_trial_at_onc
         "timeouts.tick=60",
         f"modules.{name}.restart=on-failure",
     ]
-    proc = start(WALKER, out, *sets)
+    proc = start_sfl_run(WALKER, out, *sets)
     wait_for_trials(out, 2, proc)
     module_process(proc, name).kill()
     stdout, stderr = proc.communicate(timeout=180)

@@ -7,14 +7,13 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
 from sfl_brain.local import run_local
 from sfl_brain.scenario import load
 
-from .conftest import ROOT, SCENARIOS, poll_until, sfl, sfl_run, trials_recorded
+from .conftest import SCENARIOS, poll_until, sfl, sfl_run, start_sfl_run, trials_recorded
 
 LEARN = SCENARIOS / "analytic_learn.yaml"
 TRIALS = 40
@@ -28,22 +27,9 @@ def rows_without_wall(run_dir: Path) -> list[dict]:
     return rows
 
 
-def start(out: Path, *sets: str) -> subprocess.Popen:
-    """``sfl run`` in a process group of its own (a Ctrl-C reaches it and its modules, as on a terminal)."""
-    settings = [arg for s in sets for arg in ("--set", s)]
-    return subprocess.Popen(
-        [sys.executable, "-m", "sfl_brain.cli", "run", str(LEARN), *settings, "--out", str(out), "--quiet"],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        start_new_session=True,
-    )
-
-
 def stop_after(out: Path, trials: int, sets: tuple[str, ...], signum: int) -> subprocess.Popen:
     """Start a run and send ``signum`` to its process group once its records hold ``trials`` trials."""
-    proc = start(out, *sets)
+    proc = start_sfl_run(LEARN, out, *sets, start_new_session=True)  # a Ctrl-C reaches its modules too
     poll_until(lambda: trials_recorded(out) >= trials, f"{trials} trials in {out}", 120, proc)
     os.killpg(proc.pid, signum)
     proc.communicate(timeout=60)
