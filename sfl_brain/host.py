@@ -136,6 +136,10 @@ def check_command(data: bytes, frame: SensorFrame, nonce: bytes, drops: bus.Drop
     return command
 
 
+#: why a tick or a reset ends when the body worker's host stops
+STOPPING = "the body worker is stopping"
+
+
 class TickLink:
     """What a body's link to its controller in another process does on either transport (:class:`SocketLink`,
     :class:`BusLink`): the reset, a signed request on the mesh whose nonce becomes the trial's stream nonce;
@@ -186,15 +190,31 @@ class TickLink:
     def interrupt(self) -> None:
         """Make a waiting (or the next) tick raise LinkError: the host is stopping."""
         self._stopping = True
-        self._wake("the body worker is stopping")
+        self._wake(STOPPING)
 
-    def _send_reset(self, msg: ControllerReset) -> None:
-        """A new trial, a new stream nonce: the reset request that carries it."""
+    def reset(self, msg: ControllerReset) -> None:
+        """A new trial: drop what an earlier one left on the link, send the reset (a signed request whose nonce is
+        the new trial's stream nonce), and wait for the link to be up (a restarted controller's comes up with its
+        process), within ``timeout``."""
+        if self._stopping:
+            raise LinkError(f"interrupted: {STOPPING}")
+        self._drop_stale()
+        self.waiter.restart()
         self.nonce = os.urandom(bus.Seal.NONCE)
         try:
             request(self.session, self.reset_key, msg, self.timeout, seal=self.seal, nonce=self.nonce)
         except NoReply as exc:  # a late controller interrupts the trial (it is retried); its errors do not
             raise LinkError(f"controller reset for trial {msg.trial_id}: {exc}") from None
+        if not self._link_up():
+            raise LinkError(f"trial {msg.trial_id}: no lockstep link to `{self.controller}` within {self.timeout:g} s")
+
+    def _drop_stale(self) -> None:
+        """Drop the commands (and wake-ups) an interrupted trial left on the link."""
+        raise NotImplementedError
+
+    def _link_up(self) -> bool:
+        """Wait up to ``timeout`` for the link to the controller to be up; False if it is not."""
+        raise NotImplementedError
 
 
 class BusLink(TickLink):
@@ -279,15 +299,12 @@ class BusLink(TickLink):
             except Exception:  # the session is already closing: nothing waits any more
                 pass
 
-    def reset(self, msg: ControllerReset) -> None:
-        if self._stopping:
-            raise LinkError("interrupted: the body worker is stopping")
-        while self.subscriber.try_recv() is not None:  # drop stale commands and wake-ups
+    def _drop_stale(self) -> None:
+        while self.subscriber.try_recv() is not None:
             pass
-        self.waiter.restart()
-        self._send_reset(msg)
-        if not self._linked.wait(self.timeout):  # a restarted controller's link comes up with its process
-            raise LinkError(f"trial {msg.trial_id}: no lockstep link to `{self.controller}` within {self.timeout:g} s")
+
+    def _link_up(self) -> bool:
+        return self._linked.wait(self.timeout)  # the controller's frame subscriber is matched
 
     def step(self, frame: SensorFrame) -> MotorCommand:
         clock = time.perf_counter
@@ -358,19 +375,16 @@ class SocketLink(TickLink):
         self._abort = reason
         self.channel.wake()
 
-    def reset(self, msg: ControllerReset) -> None:
-        if self._stopping:
-            raise LinkError("interrupted: the body worker is stopping")
-        self.waiter.restart()
-        # late commands of an interrupted trial are dropped; a link whose controller went away connects again
-        if not self.channel.drain() and not self.channel.connect(self.timeout, lambda: self._stopping):
-            raise LinkError(f"trial {msg.trial_id}: no lockstep link to `{self.controller}` within {self.timeout:g} s")
-        self._send_reset(msg)
+    def _drop_stale(self) -> None:
+        self.channel.drain()  # and a link whose controller went away is closed: it connects again below
+
+    def _link_up(self) -> bool:
+        return self.channel.connected or self.channel.connect(self.timeout, lambda: self._stopping)
 
     def step(self, frame: SensorFrame) -> MotorCommand:
         clock, channel = time.perf_counter, self.channel
         if self._stopping:  # interrupt() sets it before it wakes: a wake that found no socket is not lost
-            raise LinkError("interrupted: the body worker is stopping")
+            raise LinkError(f"interrupted: {STOPPING}")
         self._abort = None
         nonce = self.nonce
         try:
@@ -514,7 +528,6 @@ class Host:
         self._seen_set: set[bytes] = set()
         # the lockstep stream of the current trial: [nonce, trial_id, next tick] (set by a controller reset)
         self._stream: list | None = None
-        self._reply_tags: dict[str, str] = {}  # the tag of the reply to each stream message type
         self.run_dir = Path(spec["run_dir"]) if spec.get("run_dir") else None
 
     def stop(self) -> None:
@@ -751,25 +764,30 @@ class Host:
             query.drop()
 
     def _stream_loop(self, subscriber, message_type: type[Message]) -> None:
-        """Answer lockstep stream messages arriving on a Zenoh subscriber (:meth:`_stream_answer`); publish
-        each reply to the instance the routes name."""
-        answer, recv, publishers = self._stream_answer, subscriber.recv, self._publishers
+        """Answer lockstep stream messages arriving on a Zenoh subscriber (:meth:`_stream_reply`); publish
+        each reply, with the trial's nonce, to the instance the routes name."""
+        reply_to, recv, publishers = self._stream_reply, subscriber.recv, self._publishers
         decode_stream = decoder_for(message_type)
         while True:
             data = recv().payload.to_bytes()
             if self._stopping:
                 return
-            reply = answer(message_type, decode_stream, data)
+            reply = reply_to(message_type, decode_stream, data)
             if reply is not None:
-                tag = self._reply_tags[message_type.TAG]
-                publisher = publishers.get(tag)
+                publisher = publishers.get(reply.TAG)
                 if publisher is None:
-                    publisher = publishers[tag] = (self.ticks or self.session).declare_publisher(self._reply_key(tag))
-                publisher.put(reply)
+                    key_expr = self._reply_key(reply.TAG)
+                    publisher = publishers[reply.TAG] = (self.ticks or self.session).declare_publisher(key_expr)
+                publisher.put(encode(reply) + data[-8:])  # the nonce it came with: the trial's (checked)
 
     def _stream_answer(self, message_type: type[Message], decode_stream, data: bytes) -> bytes | None:
-        """The reply to one lockstep stream message (encoded, with the trial's nonce), or None: check the
-        trial's nonce, decode, check trial and tick, handle. What fails is dropped and counted."""
+        """What a socket lockstep link sends back for ``data``: the reply with the trial's nonce, or None."""
+        reply = self._stream_reply(message_type, decode_stream, data)
+        return None if reply is None else encode(reply) + data[-8:]
+
+    def _stream_reply(self, message_type: type[Message], decode_stream, data: bytes) -> Message | None:
+        """The reply to one lockstep stream message, or None: check the trial's nonce, decode, check trial and
+        tick, handle. What fails is dropped and counted."""
         drops, why = self.drops, ""
         try:
             msg = decode_stream(data[:-8])
@@ -800,10 +818,7 @@ class Host:
             except Exception:
                 log.exception("%s: error handling a stream message", self.instance)
                 return None
-        if reply is None:
-            return None
-        self._reply_tags[message_type.TAG] = reply.TAG
-        return encode(reply) + stream[0]
+        return reply
 
 
 def _watch_parent(host: Host) -> None:
