@@ -27,6 +27,18 @@ def logs(out) -> dict[str, str]:
     return {p.stem: p.read_text() for p in (out / "logs").glob("*.log")}
 
 
+def answer_reset(query) -> None:
+    """A controller's reset answered as its host answers it (a run without a secret)."""
+    from sfl_brain import bus
+    from sfl_brain.messages import Ack, ControllerReset, decode, encode
+
+    seal = bus.Seal(None)
+    nonce, body = seal.open_request(str(query.key_expr), query.payload.to_bytes())
+    assert type(decode(body)) is ControllerReset
+    query.reply(query.key_expr, seal.seal_reply(nonce, encode(Ack())))
+    query.drop()
+
+
 @pytest.mark.parametrize("link", ["socket", "zenoh"])
 def test_a_run_pins_its_pair_to_one_core_logs_it_and_ticks_on_its_lockstep_link(tmp_path, link):
     out = tmp_path / "run"
@@ -78,21 +90,14 @@ def test_on_its_link_the_body_takes_only_its_trials_command_and_counts_the_rest(
 
     from sfl_brain import bus
     from sfl_brain.host import BusLink
-    from sfl_brain.messages import Ack, ControllerReset, MotorCommand, SensorFrame, decode, encode
+    from sfl_brain.messages import ControllerReset, MotorCommand, SensorFrame, decode, encode
 
     endpoint = bus.tick_endpoint(tmp_path, "0")
     mesh = bus.open_session([bus.free_endpoint()], [])
     controller_end = bus.open_tick_session([endpoint], [])
     body_end = bus.open_tick_session([], [endpoint])
-    seal = bus.Seal(None)
 
-    def reset(query):  # the controller's reset, as its host answers it
-        nonce, body = seal.open_request(str(query.key_expr), query.payload.to_bytes())
-        assert type(decode(body)) is ControllerReset
-        query.reply(query.key_expr, seal.seal_reply(nonce, encode(Ack())))
-        query.drop()
-
-    queryable = mesh.declare_queryable(bus.key("r", "controller", ControllerReset.TAG), reset)
+    queryable = mesh.declare_queryable(bus.key("r", "controller", ControllerReset.TAG), answer_reset)
     frames = controller_end.declare_subscriber(
         bus.key("r", "controller", SensorFrame.TAG), zenoh.handlers.RingChannel(8)
     )
@@ -135,17 +140,10 @@ def test_on_its_socket_link_the_body_takes_only_its_trials_command_and_a_dead_co
 
     from sfl_brain import bus, ticklink
     from sfl_brain.host import LinkError, SocketLink
-    from sfl_brain.messages import Ack, ControllerReset, MotorCommand, SensorFrame, decode, encode
+    from sfl_brain.messages import ControllerReset, MotorCommand, SensorFrame, decode, encode
 
     endpoint = ticklink.endpoint(tmp_path, "0")
     mesh = bus.open_session([bus.free_endpoint()], [])
-    seal = bus.Seal(None)
-
-    def reset(query):  # the controller's reset, as its host answers it
-        nonce, body = seal.open_request(str(query.key_expr), query.payload.to_bytes())
-        assert type(decode(body)) is ControllerReset
-        query.reply(query.key_expr, seal.seal_reply(nonce, encode(Ack())))
-        query.drop()
 
     def command(trial, tick):
         return encode(MotorCommand(trial_id=trial, tick=tick, values=np.ones(2)))
@@ -156,7 +154,7 @@ def test_on_its_socket_link_the_body_takes_only_its_trials_command_and_a_dead_co
         server.listen(1)
         return server
 
-    queryable = mesh.declare_queryable(bus.key("r", "controller", ControllerReset.TAG), reset)
+    queryable = mesh.declare_queryable(bus.key("r", "controller", ControllerReset.TAG), answer_reset)
     link = SocketLink(mesh, "r", "body", "controller", timeout=10.0, endpoint=endpoint)
     server = listen()
     try:
