@@ -179,6 +179,7 @@ def main() -> None:
     busy: dict[str, list[float]] = {}
     hosted: dict[str, Processes] = {}
     floors: dict[str, _floor.Pair] = {}
+    by_hand: ByHand | None = None
     try:
         hosted["c"] = Processes(session, endpoint, "benchplanar", folder, pin=args.pin, spin=spin)
         hosted["c-zenoh"] = Processes(session, endpoint, "benchplanarzenoh", folder, pin=args.pin, link="zenoh")
@@ -240,7 +241,7 @@ def main() -> None:
             neighbour.close()
         beside = _floor.machine_load()
     finally:
-        for pair in [*hosted.values(), *floors.values(), *([by_hand] if "by_hand" in locals() else [])]:
+        for pair in [*hosted.values(), *floors.values(), *filter(None, [by_hand])]:
             pair.close()
         session.close()
         shutil.rmtree(folder, ignore_errors=True)
