@@ -113,9 +113,14 @@ class Conductor:
                     raise RunError(str(outcome))
                 yield request, outcome, time.perf_counter() - started
 
-    def record_decisions(self, rows: list[dict]) -> None:
+    def _publish(self, *events) -> None:
+        """Publish ``events``, unless the run is replaying recorded trials (they are in the records already)."""
         if not self.replaying:
-            self.events.publish(DecisionsMade(rows))
+            for event in events:
+                self.events.publish(event)
+
+    def record_decisions(self, rows: list[dict]) -> None:
+        self._publish(DecisionsMade(rows))
 
     def record_trial(
         self,
@@ -131,13 +136,10 @@ class Conductor:
         progress.successes += int(result.success)
         row = trial_row(trial, result, wall, progress.successes / progress.trials, point, learning)
         progress.last = row
-        if not self.replaying:
-            self.events.publish(TrialRecorded(row))
-            self.events.publish(ProgressUpdated(progress))
+        self._publish(TrialRecorded(row), ProgressUpdated(progress))
 
     def report_progress(self, progress: Progress) -> None:
-        if not self.replaying:
-            self.events.publish(ProgressUpdated(progress))
+        self._publish(ProgressUpdated(progress))
 
     def trial_request(self, trial_id: int, unit: np.ndarray, log: bool) -> m.TrialRequest:
         physical = self.plan.to_physical(unit)
