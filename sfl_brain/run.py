@@ -18,7 +18,6 @@ import errno
 import json
 import logging
 import os
-import platform
 import shutil
 import signal
 import socket
@@ -29,7 +28,7 @@ import traceback
 import uuid
 from collections.abc import Callable
 from dataclasses import dataclass
-from datetime import UTC, datetime
+from datetime import datetime
 from pathlib import Path
 
 import yaml
@@ -50,6 +49,7 @@ from .events import (
 )
 from .processes import kill_quietly
 from .protocols import PROTOCOLS, Conductor
+from .provenance import provenance
 from .records import RecordWriter, read_records, record_to, run_status, summarise
 from .rrlog import RERUN_FLUSH_TIMEOUT, RerunLog, layout_of
 from .runtime import Supervisor
@@ -278,50 +278,6 @@ def self_contained(plan: Plan, run_dir: Path) -> dict:
             shutil.copyfile(source, inputs / source.name)
             protocol["maps"] = f"inputs/{source.name}"
     return resolved
-
-
-#: a pathspec of what runs write into the source tree (docs/results): outputs, not changes to the code that ran
-OUTPUTS = ":!docs/results"
-
-
-def provenance() -> dict:
-    """What produced a run: package versions, Python, the platform and the source commit."""
-    from importlib import metadata
-
-    versions = {}
-    for dist in ("sfl-brain", "numpy", "eclipse-zenoh", "rerun-sdk", "pymunk", "pybullet", "pydantic", "msgspec"):
-        try:
-            versions[dist] = metadata.version(dist)
-        except metadata.PackageNotFoundError:
-            continue
-    source = Path(__file__).resolve().parents[1]
-    commit, dirty = None, None
-    try:
-        head = subprocess.run(
-            ["git", "-C", str(source), "rev-parse", "HEAD"], capture_output=True, text=True, timeout=5
-        )
-        if head.returncode == 0:
-            commit = head.stdout.strip()
-            status = subprocess.run(
-                # the results a chapter script writes as it goes (docs/results) are outputs, not the source
-                ["git", "-C", str(source), "status", "--porcelain", "--untracked-files=no", "--", ".", OUTPUTS],
-                capture_output=True,
-                text=True,
-                timeout=5,
-            )
-            dirty = bool(status.stdout.strip())
-    except (OSError, subprocess.SubprocessError):
-        pass
-    return {
-        "versions": versions,
-        "python": sys.version.split()[0],
-        "platform": platform.platform(),
-        "cpus": os.cpu_count(),
-        "commit": commit,
-        "uncommitted_changes": dirty,
-        "source": str(source),
-        "started": datetime.now(UTC).isoformat(timespec="seconds"),
-    }
 
 
 def _counters(run_dir: Path, sup: Supervisor) -> dict:
