@@ -23,6 +23,29 @@ def pytest_xdist_auto_num_workers(config) -> int:
     return len(usable_cpus()) or os.cpu_count() or 1
 
 
+def pytest_sessionstart(session) -> None:
+    """What this test run computes with, printed first even under ``-q`` (issue 35): a failure on a fresh machine
+    starts from these. Printed once, by the process that reports (not by each xdist worker)."""
+    reporter = session.config.pluginmanager.get_plugin("terminalreporter")
+    if reporter is None or hasattr(session.config, "workerinput"):
+        return
+    for line in what_computes():
+        reporter.write_line(line)
+
+
+def what_computes() -> list[str]:
+    """The versions of what computes and checks, and the numeric platform (``sfl_brain.provenance``)."""
+    from sfl_brain.provenance import DISTRIBUTIONS, numeric_platform, versions
+
+    found = versions((*DISTRIBUTIONS, "gymnasium", "cma", "optuna", "scikit-learn", "distributed", "pytest-xdist"))
+    here = numeric_platform()
+    return [
+        "sfl-brain test run with " + ", ".join(f"{k} {v}" for k, v in found.items()),
+        f"numeric platform: {here['machine']}, {here['libc']}, numpy SIMD {'+'.join(here['numpy_simd']['baseline'])}"
+        f" dispatching {'+'.join(here['numpy_simd']['dispatched']) or 'nothing'}, OpenBLAS {here['blas']}",
+    ]
+
+
 def pytest_configure(config) -> None:
     """Under pytest-xdist (``-n N``, the default ``-n auto`` in pyproject.toml), worker ``i`` of ``N`` runs on its
     own share of the usable cores (``cores[i::N]``), and so does every process its tests start (they inherit it).
