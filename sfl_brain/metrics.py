@@ -6,9 +6,14 @@ blindly; these are the numbers that claim is measured by, the same for every pro
 - failures before the first success, and before ``k`` *distinct* good gaits: a success counts as a new
   gait when its unit-cube point is at least ``distinct`` (Euclidean, in the unit cube of the scenario's
   space) from every gait counted before it; ``None`` when the run never got there (censored);
+- failures and falls apart: a failure is any unsuccessful trial (on the planar walker also one that stayed up but
+  stalled: under 0.5 m or 4 steps), a fall one whose body reports ``fell`` (metric ``m_fell``);
+- failures before the first success whose eta reaches ``target_eta`` (when one is given; ``None`` when none did);
 - cumulative failures and the best eta so far, against trials;
 - the success rate, and decisions per trial (go/no-go decisions the run made for each trial it ran;
-  1 for a proposer without a gate).
+  1 for a proposer without a gate);
+- what the early warning said of the points tried: trials whose decision was a no-go (an optimiser without the
+  gate tries its point whatever the gate says), and how many of them failed.
 
 Plain Python + numpy: a run writes them into its summary, and ``sfl report`` reads them back per run.
 """
@@ -43,8 +48,11 @@ def distinct_successes(points: np.ndarray, successes: np.ndarray, distinct: floa
     return np.asarray(at, dtype=int)
 
 
-def safe_learning(rows: Iterable[dict], k: int = K_GOOD, distinct: float = DISTINCT) -> dict:
-    """The run's safe-learning metrics (module docstring) from its record rows (any kinds; trial rows are used)."""
+def safe_learning(
+    rows: Iterable[dict], k: int = K_GOOD, distinct: float = DISTINCT, target_eta: float | None = None
+) -> dict:
+    """The run's safe-learning metrics (module docstring) from its record rows (any kinds)."""
+    rows = list(rows)
     trials = trial_rows(rows)
     n = len(trials)
     success = np.array([bool(r["success"]) for r in trials], dtype=bool)
@@ -55,6 +63,11 @@ def safe_learning(rows: Iterable[dict], k: int = K_GOOD, distinct: float = DISTI
         best = np.fmax.accumulate(eta) if n else eta
     found = distinct_successes(points, success, distinct) if points.shape[1] else np.zeros(0, dtype=int)
     first = int(np.argmax(success)) if success.any() else None
+    fell = np.array([r.get("m_fell") is True for r in trials], dtype=bool)
+    reached = np.flatnonzero(success & (eta >= target_eta)) if target_eta is not None else np.zeros(0, dtype=int)
+    # the decision that started each trial: its real go/no-go (every proposer's, gated or not)
+    tried_go = {r["trial"]: bool(r["go"]) for r in rows if r.get("kind") == "decision" and r.get("trial") is not None}
+    no_go = np.array([tried_go.get(r["trial"]) is False for r in trials], dtype=bool)
     decisions = [r.get("decision") for r in trials]
     last_decision = decisions[-1] if decisions and decisions[-1] is not None else None
     return {
@@ -68,6 +81,13 @@ def safe_learning(rows: Iterable[dict], k: int = K_GOOD, distinct: float = DISTI
         "failures_before_k": int(failures[found[k - 1]]) if len(found) >= k else None,
         "trials_to_k": int(found[k - 1]) + 1 if len(found) >= k else None,
         "distinct_gaits": int(len(found)),
+        "falls": int(fell.sum()),
+        "falls_before_k": int(np.cumsum(fell)[found[k - 1]]) if len(found) >= k else None,
+        "target_eta": target_eta,
+        "failures_before_target": int(failures[reached[0]]) if len(reached) else None,
+        "trials_to_target": int(reached[0]) + 1 if len(reached) else None,
+        "no_go_trials": int(no_go.sum()),
+        "no_go_failures": int((no_go & ~success).sum()),
         "best_eta": float(np.nanmax(eta)) if success.any() else None,
         "decisions_per_trial": (last_decision + 1) / n if n and last_decision is not None else None,
         "cumulative_failures": failures.tolist(),

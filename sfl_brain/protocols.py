@@ -178,11 +178,13 @@ class Gate:
         self.seconds += time.perf_counter() - started
         return evaluation
 
-    def record(self, candidates: np.ndarray, evaluation: m.Evaluation, go_at: int | None, count: int) -> None:
+    def record(self, candidates: np.ndarray, evaluation: m.Evaluation, tried: int | None, count: int) -> None:
+        """Record the first ``count`` decisions, each the ACC's real go/no-go (3.3); ``tried`` starts the next
+        trial (a go, but for an ungated optimiser, or a gated one past its veto budget, which may try a no-go)."""
         rows = []
         for i in range(count):
-            go = i == go_at
-            trial = self.progress.trials if go else None
+            go = bool(evaluation.go[i])
+            trial = self.progress.trials if i == tried else None
             d_s, d_f = evaluation.d_success[i], evaluation.d_failure[i]
             point = self.c.point(candidates[i])
             rows.append(decision_row(self.decision, trial, go, self.threshold.s_vig, d_s, d_f, point))
@@ -191,7 +193,7 @@ class Gate:
         self.c.record_decisions(rows)
         self.progress.decisions = self.decision
         self.progress.consecutive_nogo = self.consecutive_nogo
-        if go_at is None:
+        if tried is None:
             self.c.report_progress(self.progress)  # a long run of no-go decisions shows (and warns) while it lasts
 
     def rejected(self, consecutive: int) -> None:
@@ -220,6 +222,7 @@ def run_learn(c: Conductor) -> dict:
     if proposer.GATED:
         progress.max_decisions, progress.stall_decisions = proto.max_decisions, proto.stall_decisions
     gate = Gate(c, progress)
+    reach = body_reach(c.plan)
     n_success = n_failure = 0
     best: tuple[float, int, np.ndarray] | None = None  # (eta, trial, v) of the highest-reward success
     stop_reason = f"trial budget spent ({proto.trials} trials)"
@@ -255,7 +258,7 @@ def run_learn(c: Conductor) -> dict:
             m.TrialDone(trial_index=trial_id + 1, success=result.success, n_success=n_success, n_failure=n_failure),
         )
         started = time.perf_counter()
-        proposer.tell(v, Outcome(result.success, eta))
+        proposer.tell(v, Outcome(result.success, eta, None if result.success else trial_progress(result, reach)))
         if not c.replaying:  # the checkpoint of the trial the records end with is on disk already
             proposer.checkpoint(c.run_dir / PROPOSER_CHECKPOINT)
         telling += time.perf_counter() - started
@@ -296,6 +299,26 @@ def run_learn(c: Conductor) -> dict:
         "acc": finish.detail,
         "best": best_parameters(c, maps, best),
     }
+
+
+def body_reach(plan: Plan) -> tuple[float | None, float | None]:
+    """The body's trial ``duration`` (s) and ``finish_line`` (m), where its parameters have them (else None): what
+    :func:`trial_progress` measures a failed trial against."""
+    body = next(i for i in plan.instances if i.name in plan.bodies)
+    params = body.cls.Params.model_validate(body.params)
+    return getattr(params, "duration", None), getattr(params, "finish_line", None)
+
+
+def trial_progress(result: m.TrialResult, reach: tuple[float | None, float | None]) -> float | None:
+    """How far a failed trial got, in [0, 1]: the mean of the fraction of the trial's duration it stayed up (metric
+    ``time``) and of the finish line it covered (metric ``distance``, forward); None when the body reports neither
+    (an optimiser's ``failure_score: graded`` reads it, :meth:`sfl_brain.proposers.Outcome.score`)."""
+    fractions = []
+    for metric, whole in zip(("time", "distance"), reach, strict=True):
+        value = result.metrics.get(metric)
+        if isinstance(value, int | float) and not isinstance(value, bool) and whole and math.isfinite(value):
+            fractions.append(min(1.0, max(0.0, float(value) / whole)))
+    return sum(fractions) / len(fractions) if fractions else None
 
 
 def replay_diverged(trial: int, what: str) -> str:

@@ -47,8 +47,10 @@ def uninterrupted(sets: tuple[str, ...]) -> list[dict]:
 
 
 def test_an_interrupted_learn_run_resumes_to_the_records_of_an_uninterrupted_one(tmp_path):
-    """CMA-ES, Ctrl-C (the thesis's own proposer is resumed after a kill -9 below)."""
-    sets = (f"protocol.trials={TRIALS}", "protocol.proposer.kind=cma")
+    """CMA-ES behind the gate (veto: the replay asks the gate again, and its vetoes are told again), Ctrl-C (the
+    thesis's own proposer is resumed after a kill -9 below; CMA-ES without the gate asks as before the gate,
+    tests/test_gate.py)."""
+    sets = (f"protocol.trials={TRIALS}", "protocol.proposer={kind: cma, gate: veto}")
     whole = tmp_path / "whole"
     assert sfl_run(LEARN, whole, *sets).returncode == 0
 

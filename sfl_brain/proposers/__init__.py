@@ -7,12 +7,15 @@
 - ``safe_bo``: constrained expected improvement, a safe Bayesian optimiser that models the probability of success
   (scikit-learn's Gaussian processes).
 
+``cma``, ``tpe`` and ``safe_bo`` take ``gate: off | veto | resample``: the early warning as their safety layer
+(:meth:`.base.Optimiser.ask`).
+
 ``cma``, Optuna and scikit-learn are imported only when their proposer is made (``pip install 'sfl-brain[baselines]'``).
 """
 
 from __future__ import annotations
 
-from .base import Gate, Outcome, Proposer, ProposerParams, Ungated
+from .base import VETOED, Gate, Optimiser, OptimiserParams, Outcome, Proposer, ProposerParams
 from .cma_es import CMAES, CMAParams
 from .random_search import RandomParams, RandomSearch
 from .safe_bo import SafeBO, SafeBOParams
@@ -36,8 +39,11 @@ __all__ = [
     "NEEDS",
     "PROPOSERS",
     "TPE",
+    "VETOED",
     "CMAParams",
     "Gate",
+    "Optimiser",
+    "OptimiserParams",
     "Outcome",
     "Proposer",
     "ProposerParams",
@@ -48,5 +54,4 @@ __all__ = [
     "SafeBOParams",
     "SuccessFailure",
     "TPEParams",
-    "Ungated",
 ]

@@ -9,10 +9,13 @@ learn protocol's loop is, for every proposer (``sfl_brain.protocols.run_learn``)
 
 ``gate`` is the run's go/no-go decision (the ACC's distances to the success and failure maps against
 the vigilance threshold, Fig. 3.5 / 5.6): success-failure learning (:mod:`.sfl`) draws until the gate
-says go; every other proposer asks the library it wraps and only has its point's decision recorded
-as a go (:class:`Ungated`), so every run's records carry the same rows whichever proposer ran. The
-brain modules learn from every trial whichever proposer chose it (the maps, rho and s_vig are
-recorded alike); only success-failure learning uses them to choose.
+says go. The optimisers (:class:`Optimiser`: CMA-ES, TPE, the safe Bayesian optimiser, random search) ask
+the library they wrap; with ``gate: off`` (the default) they try that point whatever the gate says, with
+``gate: veto`` or ``gate: resample`` the gate is their safety layer (:meth:`Optimiser.ask`). Every point a
+proposer puts to the gate has its real decision recorded (``go`` is d_f - d_s > s_vig, eq. 3.3, for every
+proposer), so the records of an ungated run show what success-failure learning would have decided. The
+brain modules learn from every trial whichever proposer chose it (the maps, rho and s_vig are recorded
+alike).
 
 A proposer is checkpointed by pickling it whole after each ``tell``: its library state and its random
 generator, so a proposer restored from the checkpoint asks what the one that was stopped would have.
@@ -24,10 +27,10 @@ import os
 import pickle
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import Annotated, Literal, Protocol
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field
 
 from .. import messages as m
 
@@ -39,18 +42,36 @@ class ProposerParams(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid", strict=True, allow_inf_nan=False)
 
 
+#: how an optimiser scores a failure: ``flat`` 0 (below every success), ``graded`` by how far the trial got
+FailureScore = Literal["flat", "graded"]
+
+
 @dataclass(frozen=True)
 class Outcome:
     """What a proposer is told of one trial: success, and eta when it succeeded (5.7-5.8, J^-1 scaled as the
-    body reports it)."""
+    body reports it); for a failure, how far it got (``progress`` in [0, 1], the mean of the fraction of the
+    trial's duration it stayed up and of the finish line it covered; None when the body does not say). A point
+    the gate vetoed (``gate: veto``) is told as :data:`VETOED`: a failure that was never tried."""
 
     success: bool
     eta: float | None
+    progress: float | None = None
+    vetoed: bool = False
 
-    def score(self) -> float:
-        """The value a maximising optimiser sees: eta for a success, 0 for a failure (every success's eta is
-        above 0, so a failure ranks below every success: the libraries rank, they do not read the value)."""
-        return float(self.eta) if self.success and self.eta is not None else 0.0
+    def score(self, failure: FailureScore = "flat") -> float:
+        """The value a maximising optimiser sees: eta for a success; for a failure 0 (``flat``: every success's eta
+        is above 0, so a failure ranks below every success) or ``progress - 1`` in [-1, 0] (``graded``: a failure
+        that got further ranks higher, still below every success); a vetoed point scores as the worst failure, 0
+        (flat) or -1 (graded). CMA-ES and TPE rank the values, they do not read them."""
+        if self.success and self.eta is not None:
+            return float(self.eta)
+        if failure == "flat":
+            return 0.0
+        return -1.0 if self.vetoed or self.progress is None else float(np.clip(self.progress, 0.0, 1.0)) - 1.0
+
+
+#: a point the gate vetoed, as an optimiser is told it (``gate: veto``)
+VETOED = Outcome(success=False, eta=None, progress=0.0, vetoed=True)
 
 
 class Gate(Protocol):
@@ -61,8 +82,9 @@ class Gate(Protocol):
     def evaluate(self, candidates: np.ndarray) -> m.Evaluation:
         """The ACC's go/no-go and distances of ``candidates`` (rows in the unit cube) at the current threshold."""
 
-    def record(self, candidates: np.ndarray, evaluation: m.Evaluation, go_at: int | None, count: int) -> None:
-        """Record the first ``count`` decisions of ``evaluation``; ``go_at`` is the one that said go, if any."""
+    def record(self, candidates: np.ndarray, evaluation: m.Evaluation, tried: int | None, count: int) -> None:
+        """Record the first ``count`` decisions of ``evaluation`` (each its real go/no-go); ``tried`` is the
+        candidate that is tried (the trial it starts), if any."""
 
     def rejected(self, consecutive: int) -> None:
         """Tell vigilance of a run of ``consecutive`` no-go decisions (it may move the threshold)."""
@@ -107,15 +129,80 @@ class Proposer:
             return pickle.load(f)
 
 
-class Ungated(Proposer):
-    """A proposer that chooses without the gate: its point is tried whatever the maps say. The decision is
-    still evaluated and recorded (a go), so the records show what the gate would have said of it."""
+def _yaml_off(value):
+    """YAML 1.1 reads a bare ``off`` as false: ``gate: off`` means the word."""
+    return "off" if value is False else value
+
+
+GateMode = Annotated[Literal["off", "veto", "resample"], BeforeValidator(_yaml_off)]
+
+
+class OptimiserParams(ProposerParams):
+    """What every optimiser takes besides its own settings: the gate as a safety layer, and how a failure scores."""
+
+    gate: GateMode = Field(
+        "off",
+        description="the early warning as a safety layer: off (every point the optimiser asks is tried; the gate's "
+        "decision is recorded), veto (a no-go point is told to the optimiser as a failure, without a trial, and it "
+        "is asked again) or resample (a no-go point is drawn again from the optimiser, nothing told)",
+    )
+    max_vetoes: int = Field(
+        100,
+        ge=0,
+        le=100_000,
+        description="no-go decisions per trial before the gate gives way: the next point is tried whatever it says",
+    )
+    failure_score: FailureScore = Field(
+        "flat", description="a failure's score: flat (0) or graded (by how far the trial got, -1 to 0)"
+    )
+
+
+class Optimiser(Proposer):
+    """A proposer that asks an optimising library (``propose``) and tells it each trial's score (``tell``), with
+    the early warning as an optional safety layer (``params.gate``, :meth:`ask`). Every point it puts to the gate
+    has its real decision recorded, gated or not."""
 
     def propose(self) -> np.ndarray:
+        """The library's next point (pending until it is told or redrawn)."""
         raise NotImplementedError
 
+    def redraw(self) -> np.ndarray:
+        """Another point in place of the pending one, which the library is not told of (``gate: resample``)."""
+        raise NotImplementedError
+
+    def score(self, outcome: Outcome) -> float:
+        """The value the library maximises (:meth:`Outcome.score` with this optimiser's ``failure_score``)."""
+        return outcome.score(getattr(self.params, "failure_score", "flat"))
+
     def ask(self, gate: Gate) -> np.ndarray | None:
-        v = np.clip(np.asarray(self.propose(), dtype=float), 0.0, 1.0)
-        candidates = v[None, :]
-        gate.record(candidates, gate.evaluate(candidates), go_at=0, count=1)
-        return v
+        """The optimiser's next point, through the gate.
+
+        - ``gate: off``: the point is tried whatever the gate says (its decision is recorded);
+        - ``gate: veto``: a no-go point is told to the optimiser as :data:`VETOED` (score 0, or -1 with ``graded``
+          failures: the worst failure), without a trial, and the optimiser is asked again;
+        - ``gate: resample``: a no-go point is replaced by another draw of the optimiser (:meth:`redraw`), and
+          the optimiser is told nothing of it.
+
+        After ``max_vetoes`` no-go decisions in one trial the gate gives way: the next point is tried whatever it
+        says (recorded as a no-go that started a trial), so a gated run never stalls.
+        """
+        mode = getattr(self.params, "gate", "off")
+        v = self._in_cube(self.propose())
+        vetoes = 0
+        while True:
+            candidates = v[None, :]
+            evaluation = gate.evaluate(candidates)
+            if mode == "off" or evaluation.go[0] or vetoes >= self.params.max_vetoes:
+                gate.record(candidates, evaluation, tried=0, count=1)
+                return v
+            gate.record(candidates, evaluation, tried=None, count=1)
+            vetoes += 1
+            if mode == "veto":
+                self.tell(v, VETOED)
+                v = self._in_cube(self.propose())
+            else:
+                v = self._in_cube(self.redraw())
+
+    @staticmethod
+    def _in_cube(v) -> np.ndarray:
+        return np.clip(np.asarray(v, dtype=float), 0.0, 1.0)

@@ -1,4 +1,4 @@
-"""CMA-ES (Hansen's ``cma`` package) through its ask/tell interface, without the gate.
+"""CMA-ES (Hansen's ``cma`` package) through its ask/tell interface, with the gate as an optional safety layer.
 
 It minimises minus the score (eta for a success, 0 for a failure: :meth:`.Outcome.score`) in the unit cube
 (``bounds: [0, 1]``, the package's default boundary handling), from the cube's centre with ``sigma0`` a
@@ -7,6 +7,10 @@ package's default population (4 + 3 ln n). A population is asked at once and han
 it is told when its last point has been tried. When the strategy stops (its own ``stop()`` criteria, e.g.
 no change in f), it starts again from the centre with the next seed: the same settings, not IPOP's doubled
 population (the package's ``fmin`` does no restart by default either).
+
+Behind the gate (``gate``, :meth:`.Optimiser.ask`): a vetoed point is one of the population, told as the worst
+failure when the population is; a resampled point is replaced in the population by another draw of the same
+distribution (``es.ask(1)``, as the package's own ``ask_and_eval`` resamples an infeasible point).
 """
 
 from __future__ import annotations
@@ -16,10 +20,10 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from .base import Outcome, ProposerParams, Ungated
+from .base import Optimiser, OptimiserParams, Outcome
 
 
-class CMAParams(ProposerParams):
+class CMAParams(OptimiserParams):
     """CMA-ES in the unit cube."""
 
     kind: Literal["cma"]
@@ -39,7 +43,7 @@ class StandardNormal:
         return self.rng.standard_normal(shape)
 
 
-class CMAES(Ungated):
+class CMAES(Optimiser):
     Params = CMAParams
 
     def __init__(self, params: CMAParams, dim: int, seed: int) -> None:
@@ -74,7 +78,12 @@ class CMAES(Ungated):
         self.asked += 1
         return x[: self.dim]
 
+    def redraw(self) -> np.ndarray:
+        x = np.asarray(self.es.ask(1)[0], dtype=float)
+        self.population[self.asked - 1] = x
+        return x[: self.dim]
+
     def tell(self, v: np.ndarray, outcome: Outcome) -> None:
-        self.scores.append(-outcome.score())
+        self.scores.append(-self.score(outcome))
         if len(self.scores) == len(self.population):
             self.es.tell(self.population, self.scores)

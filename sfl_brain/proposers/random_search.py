@@ -1,5 +1,6 @@
 """Random search: uniform draws in the unit cube, tried without the gate (the baseline the thesis's
-"trying parameters blindly" names)."""
+"trying parameters blindly" names). It takes no ``gate``: uniform draws redrawn until the gate says go are
+success-failure learning (:mod:`.sfl`), from the same stream of draws."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ from typing import Literal
 
 import numpy as np
 
-from .base import Outcome, ProposerParams, Ungated
+from .base import Optimiser, Outcome, ProposerParams
 
 
 class RandomParams(ProposerParams):
@@ -16,7 +17,7 @@ class RandomParams(ProposerParams):
     kind: Literal["random"]
 
 
-class RandomSearch(Ungated):
+class RandomSearch(Optimiser):
     Params = RandomParams
 
     def __init__(self, params: RandomParams, dim: int, seed: int) -> None:

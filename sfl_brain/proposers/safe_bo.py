@@ -16,6 +16,10 @@ next point is the one most likely to succeed. Why this and not Optuna's constrai
 Optuna puts an infeasible trial in TPE's worse group, where a failure scored 0 already is; in the planar study the
 constrained and the plain TPE asked the same points in all five seeds (docs/results/baselines.md). Optuna's
 ``GPSampler`` models constraints too, but needs PyTorch.
+
+Behind the gate (``gate``, :meth:`.Optimiser.ask`): a vetoed point is told as a failure (the classifier learns the
+gate's no-go region); a resampled point is replaced by the next of the same draws in the order the acquisition ranks
+them (the safe draws by EI(x) P(s | x), then the others by P(s | x)), the models unchanged.
 """
 
 from __future__ import annotations
@@ -26,10 +30,10 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from .base import Outcome, ProposerParams, Ungated
+from .base import Optimiser, OptimiserParams, Outcome
 
 
-class SafeBOParams(ProposerParams):
+class SafeBOParams(OptimiserParams):
     """Constrained expected improvement with a Gaussian-process model of success."""
 
     kind: Literal["safe_bo"]
@@ -44,7 +48,7 @@ class SafeBOParams(ProposerParams):
     refit_every: int = Field(10, ge=1, le=100_000, description="trials between fits of the eta model's kernel")
 
 
-class SafeBO(Ungated):
+class SafeBO(Optimiser):
     Params = SafeBOParams
 
     def __init__(self, params: SafeBOParams, dim: int, seed: int) -> None:
@@ -57,20 +61,35 @@ class SafeBO(Ungated):
 
     def propose(self) -> np.ndarray:
         draws = self.rng.random((self.params.candidates, self.dim))
+        self.ranked = (draws, self._ranking(draws), 0)
+        return draws[self.ranked[1][0]]
+
+    def redraw(self) -> np.ndarray:
+        draws, order, at = self.ranked
+        if at + 1 == len(order):  # every draw redrawn: new draws
+            return self.propose()
+        self.ranked = (draws, order, at + 1)
+        return draws[order[at + 1]]
+
+    def _ranking(self, draws: np.ndarray) -> np.ndarray:
+        """The draws' indices, the one to try first first: in order for the first ``n_startup_trials``; by P(s | x)
+        until a success is seen; then the safe draws by EI(x) P(s | x) and the others by P(s | x) (none safe: all
+        by P(s | x))."""
         if len(self.points) < self.params.n_startup_trials:
-            return draws[0]
+            return np.arange(len(draws))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # scikit-learn's convergence notes on small data
             # the classifier needs both outcomes: with successes only, every draw is as likely to succeed
             p_success = self._p_success(draws) if not all(self.successes) else np.ones(len(draws))
             if not any(self.successes):
-                return draws[int(np.argmax(p_success))]
+                return np.argsort(-p_success, kind="stable")
             score = self._expected_improvement(draws) * p_success
         safe = p_success >= self.params.min_success_probability
+        by_p = np.argsort(-p_success, kind="stable")
         if not safe.any():
-            return draws[int(np.argmax(p_success))]
-        score[~safe] = -np.inf
-        return draws[int(np.argmax(score))]
+            return by_p
+        safe_first = np.flatnonzero(safe)[np.argsort(-score[safe], kind="stable")]
+        return np.concatenate([safe_first, by_p[~safe[by_p]]])
 
     def _p_success(self, draws: np.ndarray) -> np.ndarray:
         from sklearn.gaussian_process import GaussianProcessClassifier
@@ -106,4 +125,4 @@ class SafeBO(Ungated):
         self.points.append(np.asarray(v, dtype=float))
         self.successes.append(bool(outcome.success))
         if outcome.success:
-            self.etas.append(outcome.score())
+            self.etas.append(self.score(outcome))

@@ -1,4 +1,4 @@
-"""TPE (Optuna's ``TPESampler``) through Optuna's ask/tell interface, without the gate.
+"""TPE (Optuna's ``TPESampler``) through Optuna's ask/tell interface, with the gate as an optional safety layer.
 
 Each axis of the unit cube is a ``FloatDistribution(0, 1)``; the study maximises the score (eta for a success, 0
 for a failure: :meth:`.Outcome.score`), with Optuna's defaults (``n_startup_trials`` 10 random trials first,
@@ -15,10 +15,10 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from .base import Outcome, ProposerParams, Ungated
+from .base import Optimiser, OptimiserParams, Outcome
 
 
-class TPEParams(ProposerParams):
+class TPEParams(OptimiserParams):
     """Optuna's TPE sampler."""
 
     kind: Literal["tpe"]
@@ -26,7 +26,7 @@ class TPEParams(ProposerParams):
     multivariate: bool = Field(False, description="one joint model of all axes (Optuna's default: one per axis)")
 
 
-class TPE(Ungated):
+class TPE(Optimiser):
     Params = TPEParams
 
     def __init__(self, params: TPEParams, dim: int, seed: int) -> None:
@@ -47,6 +47,12 @@ class TPE(Ungated):
         self.pending = self.study.ask(self.distributions)
         return np.array([self.pending.params[f"u{i}"] for i in range(self.dim)], dtype=float)
 
+    def redraw(self) -> np.ndarray:
+        from optuna.trial import TrialState
+
+        self.study.tell(self.pending, state=TrialState.FAIL)
+        return self.propose()
+
     def tell(self, v: np.ndarray, outcome: Outcome) -> None:
         trial, self.pending = self.pending, None
-        self.study.tell(trial, outcome.score())
+        self.study.tell(trial, self.score(outcome))
