@@ -162,6 +162,10 @@ class Optimiser(Proposer):
     the early warning as an optional safety layer (``params.gate``, :meth:`ask`). Every point it puts to the gate
     has its real decision recorded, gated or not."""
 
+    def prepare(self, gate: Gate) -> None:
+        """Before each :meth:`propose`: a hook for an optimiser that consults the gate on its own (CMA-ES's novel
+        restarts)."""
+
     def propose(self) -> np.ndarray:
         """The library's next point (pending until it is told or redrawn)."""
         raise NotImplementedError
@@ -187,6 +191,7 @@ class Optimiser(Proposer):
         says (recorded as a no-go that started a trial), so a gated run never stalls.
         """
         mode = getattr(self.params, "gate", "off")
+        self.prepare(gate)
         v = self._in_cube(self.propose())
         vetoes = 0
         while True:
@@ -199,6 +204,7 @@ class Optimiser(Proposer):
             vetoes += 1
             if mode == "veto":
                 self.tell(v, VETOED)
+                self.prepare(gate)
                 v = self._in_cube(self.propose())
             else:
                 v = self._in_cube(self.redraw())

@@ -6,7 +6,10 @@ quarter of its width (the package's advice: the optimum within x0 +- 3 sigma0 of
 package's default population (4 + 3 ln n). A population is asked at once and handed out one point per trial;
 it is told when its last point has been tried. When the strategy stops (its own ``stop()`` criteria, e.g.
 no change in f), it starts again from the centre with the next seed: the same settings, not IPOP's doubled
-population (the package's ``fmin`` does no restart by default either).
+population (the package's ``fmin`` does no restart by default either). To keep it exploring (issue 33), it can also
+start again when its step size falls below ``restart_below``, and from a novel point instead of the centre
+(``restart_from: novel``: of ``novel_draws`` uniform draws, the one farthest from every success so far, among those
+the gate says go to when the gate is on; those decisions are recorded, none starts a trial).
 
 Behind the gate (``gate``, :meth:`.Optimiser.ask`): a vetoed point is one of the population, told as the worst
 failure when the population is; a resampled point is replaced in the population by another draw of the same
@@ -20,7 +23,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from .base import Optimiser, OptimiserParams, Outcome
+from .base import Gate, Optimiser, OptimiserParams, Outcome
 
 
 class CMAParams(OptimiserParams):
@@ -31,6 +34,19 @@ class CMAParams(OptimiserParams):
     popsize: int | None = Field(
         None, ge=2, le=10_000, description="points per generation; None: the package's default 4 + 3 ln(dim)"
     )
+    restart_below: float = Field(
+        0.0,
+        ge=0.0,
+        le=1.0,
+        description="start again when the step size (the largest standard deviation, unit-cube widths) falls below "
+        "this; 0: only when the package's own stop() says so",
+    )
+    restart_from: Literal["centre", "novel"] = Field(
+        "centre",
+        description="where a restart starts: the cube's centre, or (novel) of `novel_draws` uniform draws the one "
+        "farthest from every success so far, among those the gate says go to when the gate is on",
+    )
+    novel_draws: int = Field(64, ge=1, le=100_000, description="uniform draws a novel restart chooses from")
 
 
 class StandardNormal:
@@ -53,8 +69,37 @@ class CMAES(Optimiser):
         self.population: list[np.ndarray] = []
         self.asked = 0  # points of the population handed out
         self.scores: list[float] = []
+        self.successes: list[np.ndarray] = []  # every success's point (where a novel restart does not start)
+        self.restart_rng = np.random.default_rng(np.random.SeedSequence([seed, 5]))
 
-    def _start(self):
+    def prepare(self, gate: Gate) -> None:
+        """Start again before a new generation when the strategy stopped or its step size collapsed."""
+        if self.asked < len(self.population):
+            return
+        collapsed = (
+            self.params.restart_below > 0 and float(np.max(self.es.stds[: self.dim])) < self.params.restart_below
+        )
+        if collapsed or self.es.stop():
+            self.restarts += 1
+            self.es = self._start(self._restart_point(gate))
+
+    def _restart_point(self, gate: Gate) -> list[float] | None:
+        """Where a restart starts (``restart_from``): None for the centre."""
+        if self.params.restart_from == "centre":
+            return None
+        draws = self.restart_rng.random((self.params.novel_draws, self.dim))
+        if self.params.gate != "off":
+            evaluation = gate.evaluate(draws)
+            gate.record(draws, evaluation, tried=None, count=len(draws))
+            if evaluation.go.any():
+                draws = draws[np.asarray(evaluation.go, dtype=bool)]
+        if not self.successes:
+            return draws[0].tolist()
+        known = np.asarray(self.successes)
+        nearest = np.min(np.linalg.norm(draws[:, None, :] - known[None, :, :], axis=2), axis=1)
+        return draws[int(np.argmax(nearest))].tolist()
+
+    def _start(self, x0: list[float] | None = None):
         import cma
 
         seed = int(np.random.SeedSequence([self.seed, 2, self.restarts]).generate_state(1)[0] % (2**31 - 1)) + 1
@@ -63,14 +108,11 @@ class CMAES(Optimiser):
             options["popsize"] = self.params.popsize
         if self.dim == 1:  # the package needs two coordinates; the second is a dummy, never used
             options["bounds"] = [[0.0, 0.0], [1.0, 1.0]]
-        x0 = [0.5] * max(2, self.dim)
+        x0 = (x0 or [0.5] * self.dim) + [0.5] * (max(2, self.dim) - self.dim)
         return cma.CMAEvolutionStrategy(x0, self.params.sigma0, options)
 
     def propose(self) -> np.ndarray:
-        if self.asked == len(self.population):
-            if self.es.stop():
-                self.restarts += 1
-                self.es = self._start()
+        if self.asked == len(self.population):  # a new generation (prepare has started again if it was due)
             self.population = [np.asarray(x, dtype=float) for x in self.es.ask()]
             self.asked = 0
             self.scores = []
@@ -84,6 +126,8 @@ class CMAES(Optimiser):
         return x[: self.dim]
 
     def tell(self, v: np.ndarray, outcome: Outcome) -> None:
+        if outcome.success:
+            self.successes.append(np.asarray(v, dtype=float))
         self.scores.append(-self.score(outcome))
         if len(self.scores) == len(self.population):
             self.es.tell(self.population, self.scores)

@@ -1,0 +1,84 @@
+"""The statistics of a study page (issue 33): intervals that respect bounds, log-scale tests, Holm, Kaplan-Meier."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats as scipy_stats
+
+from sfl_brain import stats
+
+
+def test_a_bootstrap_interval_of_a_count_never_goes_below_zero_and_is_seeded():
+    counts = [0, 0, 1, 3, 40]  # skewed: a t-interval's lower bound is far below 0
+    mean, half, _ = 8.8, scipy_stats.t.ppf(0.975, 4) * np.std(counts, ddof=1) / math.sqrt(5), None
+    assert mean - half < 0
+    interval = stats.bootstrap_mean(counts)
+    assert interval.estimate == pytest.approx(8.8)
+    assert 0 <= interval.low < interval.estimate < interval.high <= 40
+    assert stats.bootstrap_mean(counts) == interval
+    assert stats.bootstrap_mean([3, 3, 3]).low == 3 and math.isnan(stats.bootstrap_mean([4]).low)
+
+
+def test_the_paired_log_t_test_is_scipy_s_on_the_log_scale_and_its_ratio_is_positive():
+    plain = [40, 61, 22, 35, 55]
+    gated = [10, 14, 7, 9, 12]
+    test = stats.paired_log_t(gated, plain)
+    reference = scipy_stats.ttest_rel(np.log1p(gated), np.log1p(plain))
+    assert test.p == pytest.approx(reference.pvalue, rel=1e-12)
+    assert test.p < 0.001
+    ratio = np.exp(np.mean(np.log1p(gated) - np.log1p(plain)))
+    assert test.effect.estimate == pytest.approx(ratio)
+    assert 0 < test.effect.low < ratio < test.effect.high < 1
+    assert stats.paired_log_t(plain, plain).p == 1.0
+    with pytest.raises(ValueError, match="different sizes"):
+        stats.paired_log_t([1, 2], [1, 2, 3])
+
+
+def test_welch_s_log_t_test_is_scipy_s_and_a_non_difference_is_not_significant():
+    a, b = [18, 20, 15, 22, 19], [41, 30, 77, 25, 52]
+    test = stats.welch_log_t(a, b)
+    reference = scipy_stats.ttest_ind(np.log1p(a), np.log1p(b), equal_var=False)
+    assert test.p == pytest.approx(reference.pvalue, rel=1e-10)
+    assert test.effect.high < 1
+    rng = np.random.default_rng(3)
+    same = [stats.welch_log_t(rng.poisson(20, 5), rng.poisson(20, 5)).p for _ in range(400)]
+    assert 0.02 < np.mean(np.array(same) < 0.05) < 0.09  # about its nominal rate under the null
+    with pytest.raises(ValueError, match="counts or positive"):
+        stats.welch_log_t([-1, 2], [1, 2])
+
+
+def test_holm_adjusts_step_down_monotone_and_capped():
+    adjusted = stats.holm({"a": 0.01, "b": 0.04, "c": 0.03, "d": 0.005})
+    assert adjusted == pytest.approx({"a": 0.03, "b": 0.06, "c": 0.06, "d": 0.02})
+    assert list(adjusted) == ["a", "b", "c", "d"]  # the claims in the order given
+    assert stats.holm({"x": 0.6, "y": 0.7}) == {"x": 1.0, "y": 1.0}
+    assert stats.holm({}) == {}
+    with pytest.raises(ValueError, match="must be in"):
+        stats.holm({"x": 1.5})
+
+
+def test_kaplan_meier_median_with_and_without_censoring():
+    assert stats.kaplan_meier_median([1, 2, 3, 4], [False] * 4) == 2
+    # 5: 4/5 left; 8 censored; 10: 4/5 * 2/3 = 0.53; 12 censored; 20: 0
+    assert stats.kaplan_meier_median([5, 8, 10, 12, 20], [False, True, False, True, False]) == 20
+    assert (
+        stats.kaplan_meier_median([5, 9, 12, 14, 20], [False, True, True, True, True]) is None
+    )  # most never got there
+
+
+def test_a_censored_rank_test_takes_censored_runs_against_the_claim():
+    low, high = [3, 4, 5, 6, 7], [10, 12, 14, 16, 18]
+    assert stats.censored_rank_test(low, [False] * 5, high, [False] * 5).p == pytest.approx(2 / 252)
+    # high's censored runs (lower bounds) still lie above: the claim stands
+    assert stats.censored_rank_test(low, [False] * 5, high, [True] * 5).p == pytest.approx(2 / 252)
+    # low's runs that never got there might lie anywhere above: the claim cannot stand
+    assert stats.censored_rank_test(low, [True, True, True, False, False], high, [False] * 5).p > 0.3
+
+
+def test_the_sign_test_of_five_seeds_cannot_go_below_one_in_sixteen():
+    assert stats.sign_test([1, 2, 3, 4, 5]).p == pytest.approx(1 / 16)
+    assert stats.sign_test([1, -2, 3, 0, 5]).n == (4,)
+    assert stats.sign_test([0, 0]).p == 1.0
