@@ -1,25 +1,53 @@
 #!/usr/bin/env bash
-# Safe-learning baselines side by side (issue 22; docs/results/baselines.md): every proposer of
-# docs/proposers.md, five seeds each, the same trial budget, on
-#   the planar reflex walker in the E3.2 setting (scenarios/baselines_planar.yaml: 200 trials; ~14 min on 2 cores)
-#   the humanoid in the E5.1 setting (scenarios/baselines_humanoid.yaml: 100 trials; ~45 min on 2 cores)
-# each a `sfl study` (runs over processes, JOBS at once, default 2) into runs/baselines/<body>/, its report (learning
-# curves with 95 % bands, failures before K good gaits, best eta, the table) into docs/results/baselines/<body>/.
-# Run again, a study keeps its finished runs and runs only the others (docs/studies.md).
-#   bash docs/experiments/baselines.sh
+# Does the early warning make a good optimiser safe? (issues 22 and 33; docs/results/baselines.md) On both walkers,
+# the same trial budget, five seeds (0-4):
+#   the planar reflex walker in the E3.2 setting (scenarios/baselines_planar.yaml: 200 trials),
+#   the humanoid in the E5.1 setting (scenarios/baselines_humanoid.yaml: 100 trials),
+# success-failure learning at a sweep of vigilance (planar 0.05 / 0 / -0.1; humanoid 0 / -0.15 / adaptive), random
+# search, and CMA-ES, TPE and the safe optimiser each without the gate (plain) and behind it (gated). Each group set
+# is a `sfl study` (runs over processes, JOBS at once, default 1) into runs/baselines/<body>/<set>/; a study run again
+# keeps its finished runs and runs the others (docs/studies.md). Then docs/experiments/baselines_page.py reads every
+# run and writes the page, its figures and its claims (docs/results/baselines.md, docs/results/baselines/).
+#   bash docs/experiments/baselines.sh                         # everything: about 2 h planar, 3 h humanoid on 2 cores
+#   BODIES=planar SETS="sfl plain" bash docs/experiments/baselines.sh    # a part of it
+#   PAGE_ONLY=1 bash docs/experiments/baselines.sh             # the page from the runs there are
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 OUT=${OUT:-runs/baselines}
-RESULTS=${RESULTS:-docs/results/baselines}
-JOBS=${JOBS:-2}
+JOBS=${JOBS:-1}
 SEEDS=${SEEDS:-0,1,2,3,4}
-PROPOSERS=${PROPOSERS:-sfl,random,cma,tpe,safe_bo}
-for body in planar humanoid; do
-  status=0
-  sfl study "scenarios/baselines_$body.yaml" --vary "protocol.proposer.kind=$PROPOSERS" --seeds "$SEEDS" \
-    --jobs "$JOBS" --out "$OUT/$body" || status=$?
-  # a stalled or failed run is named by the study and left out of its means; the report is written either way
+BODIES=${BODIES:-planar humanoid}
+SETS=${SETS:-sfl plain gated}
+
+# the gated optimisers: the gate and how each keeps exploring behind it (docs/proposers.md, issue 33 item 2)
+GATED_CMA='{kind: cma, gate: veto}'
+GATED_TPE='{kind: tpe, gate: veto}'
+GATED_SAFE_BO='{kind: safe_bo, gate: veto}'
+
+study() {  # study BODY NAME ARGS...: one `sfl study` of the body's scenario into $OUT/BODY/NAME
+  local body=$1 name=$2 status=0
+  shift 2
+  sfl study "scenarios/baselines_$body.yaml" --seeds "$SEEDS" --jobs "$JOBS" --out "$OUT/$body/$name" "$@" || status=$?
+  # a stalled or failed run is named by the study and left out of the page's means
   if [ "$status" -ne 0 ] && [ "$status" -ne 1 ] && [ "$status" -ne 3 ]; then exit "$status"; fi
-  mkdir -p "$RESULTS/$body"
-  sfl report "$OUT/$body" --out "$RESULTS/$body"
-done
+}
+
+if [ -z "${PAGE_ONLY:-}" ]; then
+  for body in $BODIES; do
+    for set in $SETS; do
+      case "$body/$set" in
+        planar/sfl) study planar sfl --vary modules.vigilance.params.value=0.05,0,-0.1 ;;
+        humanoid/sfl)
+          study humanoid sfl --vary modules.vigilance.params.value=0,-0.15
+          study humanoid sfl_adaptive --set modules.vigilance.params.mode=adaptive ;;  # from -0.15, step 0.01
+        */plain) study "$body" plain --vary protocol.proposer.kind=random,cma,tpe,safe_bo ;;
+        */gated)
+          study "$body" gated_cma --set "protocol.proposer=$GATED_CMA"
+          study "$body" gated_tpe --set "protocol.proposer=$GATED_TPE"
+          study "$body" gated_safe_bo --set "protocol.proposer=$GATED_SAFE_BO" ;;
+        *) echo "unknown set $set" >&2; exit 2 ;;
+      esac
+    done
+  done
+fi
+python docs/experiments/baselines_page.py --runs "$OUT" --page docs/results/baselines.md --figures docs/results/baselines
