@@ -8,8 +8,15 @@ over its completed runs (seeds):
   the mean over seeds with a 95 % t-interval band; the best eta so far the same way;
 - failures before K distinct good gaits (:func:`sfl_brain.metrics.safe_learning`) as box plots, with the runs
   that never got there (censored) drawn apart at their total failures, a lower bound;
-- a table: seeds, failures before the first success, failures before K, the success rate over the last window,
-  the best eta and the wall time, each as mean +- the half-width of its 95 % t-interval, with censored counts.
+- a table: seeds, failures before the first success, failures before K, failures, falls, the success rate over the
+  last window, the best eta and the wall time, each as the mean and its 95 % percentile bootstrap interval over the
+  seeds (:func:`sfl_brain.stats.bootstrap_mean`: within the values' range, never below 0 for a count), with censored
+  counts.
+
+For pages that compare groups and make claims (``docs/results/baselines.md``): :func:`bounded_cell`,
+:func:`censored_cell`, :func:`tradeoff_figure` (failures against best eta per group) and :class:`Claim` with
+:func:`claims_table` (each claim's test, effect, p and Holm-adjusted p over the page's family; a claim whose adjusted
+p is not below alpha is marked not shown).
 
 A run that did not complete (stalled, failed, interrupted, killed) is in no curve, box or mean: it is named under
 the table with its status and why.
@@ -31,6 +38,7 @@ from scipy import stats  # noqa: E402
 
 from .metrics import DISTINCT, K_GOOD, safe_learning, trial_rows  # noqa: E402
 from .records import read_records, run_status  # noqa: E402
+from .stats import Test, bootstrap_mean, holm, kaplan_meier_median  # noqa: E402
 from .study import WINDOW  # noqa: E402
 
 #: figure width (in) and font size (pt): readable on a printed page
@@ -292,20 +300,47 @@ def _failures_figure(groups: dict[str, list[RunMetrics]], settings: StudySetting
 
 
 # --------------------------------------------------------------------------- the page
+def bounded_cell(values, digits: str = ".3g") -> str:
+    """The mean of the finite ``values`` and its 95 % percentile bootstrap interval, ``mean [low, high]`` (``-``
+    without a value; the mean alone with one)."""
+    a = [float(v) for v in values if v is not None and np.isfinite(v)]
+    if not a:
+        return "-"
+    interval = bootstrap_mean(a)
+    if len(a) == 1:
+        return f"{interval.estimate:{digits}}"
+    return f"{interval.estimate:{digits}} [{interval.low:{digits}}, {interval.high:{digits}}]"
+
+
+def censored_cell(values, censored, digits: str = ".3g") -> str:
+    """Counts to an event some runs never reached (``censored``; their value a lower bound): how many reached it, and
+    the mean with its bootstrap interval when all did, else the Kaplan-Meier median (``never`` when under half
+    did)."""
+    values, censored = list(values), [bool(c) for c in censored]
+    n, reached = len(values), censored.count(False)
+    if n == 0:
+        return "-"
+    if reached == n:
+        return f"{bounded_cell(values, digits)} (all {n})"
+    median = kaplan_meier_median(values, censored)
+    shown = "never (median)" if median is None else f"median {median:{digits}} (Kaplan-Meier)"
+    return f"{reached} of {n} reach it; {shown}"
+
+
 def _cell(values, censored: list | None = None, digits: str = ".3g") -> str:
-    mean, half, n = t_interval(values)
-    text = "-" if n == 0 else f"{mean:{digits}}" if n == 1 else f"{mean:{digits}} ± {half:.2g}"
+    text = bounded_cell(values, digits)
     if censored:
         text += f" ({len(censored)} censored, at ≥ {', '.join(f'{c:g}' for c in sorted(censored))})"
     return text
 
 
 def group_table(groups: dict[str, list[RunMetrics]], settings: StudySettings) -> list[str]:
-    """The Markdown table of the groups: mean ± 95 % CI half-width over each group's completed runs."""
+    """The Markdown table of the groups: the mean and its 95 % bootstrap interval over each group's completed runs."""
     lines = [
         f"| group | seeds | failures before first success | failures before K={settings.k} | failures, all trials | "
-        f"success rate, all trials | success rate, last {settings.window} trials | best eta | wall time, s |",
-        "|---|---|---|---|---|---|---|---|---|",
+        f"falls, all trials | success rate, all trials | success rate, last {settings.window} trials | best eta | "
+        "wall time, s |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for label, runs in groups.items():
         m = [r.metrics for r in runs]
@@ -320,7 +355,7 @@ def group_table(groups: dict[str, list[RunMetrics]], settings: StudySettings) ->
         lines.append(
             f"| {label} | {len(runs)} | {_cell([v for v in first if v is not None], never)} "
             f"| {_cell([v for v in before_k if v is not None], short)} "
-            f"| {_cell([x['failures'] for x in m], digits='.1f')} "
+            f"| {_cell([x['failures'] for x in m], digits='.1f')} | {_cell([x['falls'] for x in m], digits='.1f')} "
             f"| {_cell([x['success_rate'] for x in m], digits='.2f')} | {_cell(final, digits='.2f')} | {eta} "
             f"| {_cell([r.wall_s for r in runs], digits='.1f')} |"
         )
@@ -351,8 +386,10 @@ def study_section(run_dirs: list[Path], out: Path, settings: StudySettings) -> t
         "",
         f"Runs grouped by what differs between their scenarios (the seed apart); each group over its completed runs "
         f"(seeds). A good gait is a success at least {settings.distinct:g} (unit cube) from every good gait before it; "
-        f"K = {settings.k}. Each value is the mean ± the half-width of its 95 % t-interval over the seeds; a run that "
-        "never got there is censored (counted apart, its total failures a lower bound), not averaged.",
+        f"K = {settings.k}. Each value is the mean and its 95 % percentile bootstrap interval over the seeds "
+        "(within the values' range; with few seeds it is narrower than it should be); a run that never got there "
+        "is censored (counted apart, its total failures a lower bound), not averaged. A failure is any unsuccessful "
+        "trial, a fall one whose body reports `fell`.",
         "",
     ]
     if shown:
@@ -429,3 +466,77 @@ def study_runs(folder: Path) -> tuple[list[Path], dict[str, str]]:
     }
     said.update({n: "never run" for n in planned if n not in found and n not in said})
     return [found[n] for n in order], said
+
+
+# --------------------------------------------------------------------------- comparisons and claims
+def tradeoff_figure(panels: dict[str, dict[str, list[tuple[float, float]]]], path: Path) -> None:
+    """Failures against best eta, one panel per walker: each group's mean (bootstrap 95 % intervals as bars) and its
+    seeds (small dots). ``panels``: walker -> group -> [(failures, best eta) per seed] (a run without a success has
+    best eta 0)."""
+    with plt.rc_context(STYLE):
+        fig, axes = plt.subplots(1, len(panels), figsize=(WIDTH_IN * (1.0 if len(panels) > 1 else 0.6), 3.6))
+        axes = np.atleast_1d(axes)
+        for ax, (walker, groups) in zip(axes, panels.items(), strict=True):
+            markers = "osD^v<>Pp*hX"
+            for i, (colour, (label, points)) in enumerate(zip(_colours(len(groups)), groups.items(), strict=True)):
+                f = np.array([p[0] for p in points], dtype=float)
+                e = np.array([p[1] for p in points], dtype=float)
+                fi, ei = bootstrap_mean(f), bootstrap_mean(e)
+                ax.scatter(f, e, s=9, color=colour, alpha=0.45, lw=0)
+                ax.errorbar(
+                    fi.estimate,
+                    ei.estimate,
+                    xerr=[[fi.estimate - fi.low], [fi.high - fi.estimate]] if len(f) > 1 else None,
+                    yerr=[[ei.estimate - ei.low], [ei.high - ei.estimate]] if len(e) > 1 else None,
+                    fmt=markers[i % len(markers)],
+                    color=colour,
+                    ms=6,
+                    capsize=2,
+                    lw=1,
+                    label=label,
+                )
+            ax.set_xlabel("failures over the budget (trials)")
+            ax.set_ylabel(ETA_LABEL.replace(" so far", ""))
+            ax.set_title(walker)
+            ax.set_xlim(left=0)
+        handles, labels = axes[0].get_legend_handles_labels()
+        for ax in axes[1:]:
+            for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+                if lab not in labels:
+                    handles.append(h)
+                    labels.append(lab)
+        fig.legend(handles, labels, loc="lower center", ncol=3, frameon=False)
+        fig.suptitle("Failures against best eta: each group's mean and 95 % bootstrap intervals, its seeds as dots")
+        fig.tight_layout(rect=(0, 0.05 + 0.045 * ((len(labels) - 1) // 3 + 1), 1, 1))
+        fig.savefig(path, dpi=150)
+        plt.close(fig)
+
+
+@dataclass(frozen=True)
+class Claim:
+    """A comparison a page makes: what it says when it holds (``says``), the test (:mod:`sfl_brain.stats`) and how
+    the effect reads (``effect``: e.g. "ratio of failures")."""
+
+    key: str
+    says: str
+    test: Test
+    effect: str
+
+
+def claims_table(claims: list[Claim], alpha: float = 0.05) -> tuple[list[str], dict[str, float]]:
+    """The Markdown table of a page's claims with Holm's adjustment over all of them, and the adjusted p per claim.
+    A claim holds when its adjusted p is below ``alpha``; one that does not is marked *not shown* (the page must not
+    make it)."""
+    adjusted = holm({c.key: c.test.p for c in claims})
+    lines = [
+        f"| # | comparison | test (seeds) | effect, 95 % CI | p | Holm p (over {len(claims)}) | at {alpha:g} |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for i, c in enumerate(claims, 1):
+        holds = adjusted[c.key] < alpha
+        n = " vs ".join(str(x) for x in c.test.n)
+        lines.append(
+            f"| {i} | {c.says} | {c.test.name} ({n}) | {c.effect} {c.test.effect.text()} | {c.test.p:.2g} "
+            f"| {adjusted[c.key]:.2g} | {'**holds**' if holds else 'not shown'} |"
+        )
+    return lines, adjusted

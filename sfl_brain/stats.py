@@ -94,17 +94,22 @@ def bootstrap_mean(
     return Interval(float(a.mean()), float(low), float(high), confidence)
 
 
-def _log1p(values: Sequence[float]) -> np.ndarray:
-    a = _finite(values)
-    if a.size and np.any(a < 0):
+def _log(values: Sequence[float], shift: float = 1.0) -> np.ndarray:
+    a = _finite(values) + shift
+    if a.size and np.any(a <= 0):
         raise ValueError(f"a log-scale test takes counts or positive values, got {list(values)}")
-    return np.log1p(a)
+    return np.log(a)
 
 
-def paired_log_t(a: Sequence[float], b: Sequence[float], confidence: float = 0.95) -> Test:
-    """Paired t-test of log(a + 1) - log(b + 1), seed by seed (``a[i]`` and ``b[i]`` the same seed): the effect is
-    the geometric mean ratio (a + 1) / (b + 1) with its t-interval, back from the log scale (always positive)."""
-    x, y = _log1p(a), _log1p(b)
+def _scale(shift: float) -> str:
+    return "log x" if shift == 0 else f"log(x+{shift:g})"
+
+
+def paired_log_t(a: Sequence[float], b: Sequence[float], confidence: float = 0.95, shift: float = 1.0) -> Test:
+    """Paired t-test of log(a + shift) - log(b + shift), seed by seed (``a[i]`` and ``b[i]`` the same seed): the
+    effect is the geometric mean ratio (a + shift) / (b + shift) with its t-interval, back from the log scale (always
+    positive). ``shift`` 1 for counts (a run without a failure stays finite), 0 for positive values (eta)."""
+    x, y = _log(a, shift), _log(b, shift)
     if x.size != y.size:
         raise ValueError(f"paired samples of different sizes: {x.size} and {y.size}")
     d = x - y
@@ -114,22 +119,23 @@ def paired_log_t(a: Sequence[float], b: Sequence[float], confidence: float = 0.9
     mean, sd = float(d.mean()), float(d.std(ddof=1))
     if sd == 0.0:
         p = 1.0 if mean == 0.0 else 0.0
-        return Test("paired t, log(x+1)", p, Interval(math.exp(mean), math.exp(mean), math.exp(mean), confidence), (n,))
+        exact = Interval(math.exp(mean), math.exp(mean), math.exp(mean), confidence)
+        return Test(f"paired t, {_scale(shift)}", p, exact, (n,))
     se = sd / math.sqrt(n)
     p = float(2 * stats.t.sf(abs(mean) / se, n - 1))
     half = float(stats.t.ppf((1 + confidence) / 2, n - 1) * se)
     return Test(
-        "paired t, log(x+1)",
+        f"paired t, {_scale(shift)}",
         p,
         Interval(math.exp(mean), math.exp(mean - half), math.exp(mean + half), confidence),
         (n,),
     )
 
 
-def welch_log_t(a: Sequence[float], b: Sequence[float], confidence: float = 0.95) -> Test:
-    """Welch's t-test of log(a + 1) against log(b + 1) (unpaired, unequal variances): the effect is the ratio of the
-    geometric means of (a + 1) and (b + 1) with its Welch interval, back from the log scale."""
-    x, y = _log1p(a), _log1p(b)
+def welch_log_t(a: Sequence[float], b: Sequence[float], confidence: float = 0.95, shift: float = 1.0) -> Test:
+    """Welch's t-test of log(a + shift) against log(b + shift) (unpaired, unequal variances): the effect is the ratio
+    of the geometric means of (a + shift) and (b + shift) with its Welch interval, back from the log scale."""
+    x, y = _log(a, shift), _log(b, shift)
     if x.size < 2 or y.size < 2:
         raise ValueError("Welch's test needs two values or more in each group")
     diff = float(x.mean() - y.mean())
@@ -138,7 +144,7 @@ def welch_log_t(a: Sequence[float], b: Sequence[float], confidence: float = 0.95
     if se == 0.0:
         p = 1.0 if diff == 0.0 else 0.0
         return Test(
-            "Welch t, log(x+1)",
+            f"Welch t, {_scale(shift)}",
             p,
             Interval(math.exp(diff), math.exp(diff), math.exp(diff), confidence),
             (x.size, y.size),
@@ -147,7 +153,7 @@ def welch_log_t(a: Sequence[float], b: Sequence[float], confidence: float = 0.95
     p = float(2 * stats.t.sf(abs(diff) / se, df))
     half = float(stats.t.ppf((1 + confidence) / 2, df) * se)
     effect = Interval(math.exp(diff), math.exp(diff - half), math.exp(diff + half), confidence)
-    return Test("Welch t, log(x+1)", p, effect, (x.size, y.size))
+    return Test(f"Welch t, {_scale(shift)}", p, effect, (x.size, y.size))
 
 
 def ratio_interval(a: Sequence[float], b: Sequence[float], paired: bool, confidence: float = 0.95) -> Interval:

@@ -44,8 +44,8 @@ _f8, _i8, _b = pa.float64(), pa.int64(), pa.bool_()
 
 DECISION_COLUMNS: tuple[Column, ...] = (
     Column("decision", _i8, "", "index of the decision in the run, from 0"),
-    Column("trial", _i8, "", "the trial this go decision started (null for a no-go)"),
-    Column("go", _b, "", "the early warning let the candidate through (3.3)"),
+    Column("trial", _i8, "", "the trial its candidate was tried in (null when not tried: a no-go of a gated proposer)"),
+    Column("go", _b, "", "the early warning's decision, d_f - d_s > s_vig (3.3), for every proposer"),
     Column("s_vig", _f8, "", "vigilance threshold the decision used"),
     Column("d_success", _f8, "unit space", "distance to the success map's winner (3.1)"),
     Column("d_failure", _f8, "unit space", "distance to the failure map's winner (3.2)"),
@@ -54,7 +54,7 @@ DECISION_COLUMNS: tuple[Column, ...] = (
 
 TRIAL_COLUMNS: tuple[Column, ...] = (
     Column("trial", _i8, "", "index of the trial in the run, from 0"),
-    Column("decision", _i8, "", "the go decision that started it (learn protocol)"),
+    Column("decision", _i8, "", "the decision whose candidate it tried (learn protocol)"),
     Column("success", _b, "", "the body's verdict on the trial"),
     Column("quality", _f8, "", "the body's quality eta of the trial (efficiency); null if none"),
     Column("rho", _f8, "", "OFC's graded reward of a success (QARL); null for failures or without OFC"),

@@ -82,3 +82,13 @@ def test_the_sign_test_of_five_seeds_cannot_go_below_one_in_sixteen():
     assert stats.sign_test([1, 2, 3, 4, 5]).p == pytest.approx(1 / 16)
     assert stats.sign_test([1, -2, 3, 0, 5]).n == (4,)
     assert stats.sign_test([0, 0]).p == 1.0
+
+
+def test_a_ratio_of_positive_values_is_tested_on_log_x():
+    gated, plain = [0.0102, 0.0104, 0.0099, 0.0105, 0.0101], [0.0105, 0.0106, 0.0104, 0.0105, 0.0103]
+    test = stats.paired_log_t(gated, plain, shift=0.0)
+    assert test.name == "paired t, log x"
+    assert test.p == pytest.approx(scipy_stats.ttest_rel(np.log(gated), np.log(plain)).pvalue, rel=1e-12)
+    assert test.effect.estimate == pytest.approx(np.exp(np.mean(np.log(gated) - np.log(plain))))
+    with pytest.raises(ValueError, match="positive"):
+        stats.paired_log_t([0.0, 1.0], [1.0, 1.0], shift=0.0)

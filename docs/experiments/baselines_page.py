@@ -1,0 +1,477 @@
+"""The baselines page from the studies of ``docs/experiments/baselines.sh`` (issue 33): does the early warning make a
+good optimiser safe?
+
+    python docs/experiments/baselines_page.py [--runs runs/baselines] [--page docs/results/baselines.md]
+                                              [--figures docs/results/baselines]
+
+Every run folder under ``RUNS/<walker>/<study>/`` is read (``records.jsonl``, ``scenario.yaml``, ``summary.json``);
+runs are grouped by what they are (the proposer, its gate and settings, the vigilance), whatever study holds them.
+Only completed runs enter a number; the others are listed. The page's numbers, claims and figures are all computed
+here: the claims are a family fixed below (:func:`claims`) before any run was read, each with its test and Holm's
+adjustment over the family (:mod:`sfl_brain.stats`); a claim whose adjusted p is not below 0.05 is shown as *not
+shown*, and the text says so. ``numbers.json`` beside the figures holds every run's metrics.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))
+from sfl_brain import stats  # noqa: E402
+from sfl_brain.metrics import DISTINCT, K_GOOD, safe_learning  # noqa: E402
+from sfl_brain.records import read_records, run_status  # noqa: E402
+from sfl_brain.report_study import (  # noqa: E402
+    Claim,
+    RunMetrics,
+    StudySettings,
+    _curves_figure,
+    _eta_figure,
+    _failures_figure,
+    bounded_cell,
+    censored_cell,
+    claims_table,
+    tradeoff_figure,
+)
+
+#: the walkers, their scenario's trial budget and the vigilance the gate runs at (the scenario's own)
+WALKERS = {
+    "planar": {"title": "The planar reflex walker, E3.2 setting (flat, 10x10 maps, no QARL; 200 trials)", "s_vig": 0.0},
+    "humanoid": {"title": "The humanoid, E5.1 setting (flat, 5x5x5 maps, QARL; 100 trials)", "s_vig": -0.15},
+}
+OPTIMISERS = ("cma", "tpe", "safe_bo")
+#: the defaults of an optimiser's settings (a group's label names the others)
+DEFAULTS = {
+    "gate": "off",
+    "max_vetoes": 100,
+    "failure_score": "flat",
+    "sigma0": 0.25,
+    "popsize": None,
+    "restart_below": 0.0,
+    "restart_from": "centre",
+    "novel_draws": 64,
+    "n_startup_trials": 10,
+    "multivariate": False,
+    "candidates": 1024,
+    "min_success_probability": 0.5,
+    "length_scale": 0.2,
+    "refit_every": 10,
+}
+#: the target eta of "failures before a target eta": the lower quartile of the plain optimisers' best etas (three
+#: quarters of their runs reach it), fixed before the runs were read
+TARGET_QUANTILE = 0.25
+ALPHA = 0.05
+
+
+@dataclass
+class Run:
+    name: str
+    path: Path
+    walker: str
+    label: str
+    role: str  # sfl, random, plain, gated
+    kind: str
+    seed: int
+    status: str
+    reason: str
+    rows: list
+    wall_s: float | None
+    metrics: dict | None = None
+
+
+def label_of(scenario: dict, walker: str) -> tuple[str, str, str]:
+    """(label, role, kind) of a run's scenario: ``sfl, s_vig 0``, ``cma``, ``cma + gate (resample, ...)``."""
+    proposer = scenario["protocol"].get("proposer") or {"kind": "sfl"}
+    kind = proposer["kind"]
+    vigilance = scenario["modules"]["vigilance"]["params"]
+    mode = vigilance.get("mode", "fixed")
+    value = float(vigilance.get("value", 0.0))
+    if mode == "fixed":
+        s_vig = f"s_vig {value:g}"
+    elif mode == "adaptive":
+        s_vig = f"adaptive s_vig from {value:g}"
+    else:
+        s_vig = f"{mode} s_vig (4.14)"
+    if kind == "sfl":
+        return f"sfl, {s_vig}", "sfl", kind
+    if kind == "random":
+        return "random", "random", kind
+    gate = proposer.get("gate", "off")
+    if gate is False:  # YAML's off
+        gate = "off"
+    settings = [f"{k} {v}" for k, v in proposer.items() if k not in ("kind", "gate") and DEFAULTS.get(k, v) != v]
+    if mode != "fixed" or value != WALKERS[walker]["s_vig"]:
+        settings.append(s_vig)
+    if gate == "off":
+        return kind + (f" ({', '.join(settings)})" if settings else ""), "plain", kind
+    return f"{kind} + gate ({', '.join([gate, *settings])})", "gated", kind
+
+
+def read_runs(runs: Path) -> list[Run]:
+    found = []
+    for walker in WALKERS:
+        for scenario_file in sorted((runs / walker).glob("*/*/scenario.yaml")):
+            folder = scenario_file.parent
+            if folder.parent.name == "attempts" or folder.parent.parent.name == "attempts":
+                continue
+            scenario = yaml.safe_load(scenario_file.read_text())
+            if scenario.get("protocol", {}).get("kind") != "learn":
+                continue
+            label, role, kind = label_of(scenario, walker)
+            status, reason = run_status(folder)
+            try:
+                wall = json.loads((folder / "summary.json").read_text()).get("wall_time_s")
+            except (OSError, ValueError):
+                wall = None
+            rows = read_records(folder)
+            found.append(
+                Run(
+                    f"{folder.parent.name}/{folder.name}",
+                    folder,
+                    walker,
+                    label,
+                    role,
+                    kind,
+                    int(scenario["seed"]),
+                    status,
+                    reason,
+                    rows,
+                    wall,
+                )
+            )
+    return found
+
+
+def completed(runs: list[Run]) -> list[Run]:
+    planned = {}
+    for r in runs:
+        planned[r.walker] = planned.get(r.walker, 0)
+    return [r for r in runs if r.status == "completed" and r.metrics and r.metrics["trials"] > 0]
+
+
+def group(runs: list[Run]) -> dict[str, list[Run]]:
+    """Runs by label, in the page's order (sfl by vigilance, random, then each optimiser plain and gated), each group's
+    runs by seed."""
+    order = {"sfl": 0, "random": 1, "plain": 2, "gated": 2}
+    groups: dict[str, list[Run]] = {}
+    for r in sorted(
+        runs,
+        key=lambda r: (order[r.role], OPTIMISERS.index(r.kind) if r.kind in OPTIMISERS else 0, r.role, r.label, r.seed),
+    ):
+        groups.setdefault(r.label, []).append(r)
+    return groups
+
+
+def target_eta(runs: list[Run]) -> float | None:
+    etas = [r.metrics["best_eta"] or 0.0 for r in runs if r.role == "plain" and r.kind in OPTIMISERS]
+    return float(np.quantile(etas, TARGET_QUANTILE)) if etas else None
+
+
+def decisions_per_trial(run: Run) -> float:
+    return run.metrics["decisions_per_trial"] or 1.0
+
+
+# --------------------------------------------------------------------------- the tables
+def groups_table(groups: dict[str, list[Run]], target: float | None) -> list[str]:
+    lines = [
+        f"| group | seeds | failures | falls (`m_fell`) | failures before {K_GOOD} good gaits | failures before eta "
+        f"{target:.3g} | distinct good gaits | best eta | tried where the gate says no-go | ACC evaluations "
+        "per trial |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for label, runs in groups.items():
+        m = [r.metrics for r in runs]
+        per_trial = [decisions_per_trial(r) for r in runs]
+        lines.append(
+            f"| {label} | {len(runs)} | {bounded_cell([x['failures'] for x in m], '.1f')} "
+            f"| {bounded_cell([x['falls'] for x in m], '.1f')} "
+            f"| {censored_cell([x['failures_before_k'] if x['failures_before_k'] is not None else x['failures'] for x in m], [x['failures_before_k'] is None for x in m], '.3g')} "  # noqa: E501
+            f"| {censored_cell([x['failures_before_target'] if x['failures_before_target'] is not None else x['failures'] for x in m], [x['failures_before_target'] is None for x in m], '.3g')} "  # noqa: E501
+            f"| {bounded_cell([x['distinct_gaits'] for x in m], '.1f')} "
+            f"| {bounded_cell([x['best_eta'] or 0.0 for x in m], '.3g')} "
+            f"| {bounded_cell([x['no_go_trials'] for x in m], '.1f')} "
+            f"| {np.mean(per_trial):.1f} ({min(per_trial):.1f}-{max(per_trial):.1f}) |"
+        )
+    return lines
+
+
+def by_seed(runs: list[Run]) -> dict[int, dict]:
+    return {r.seed: r.metrics for r in runs}
+
+
+def paired(a: list[Run], b: list[Run], key) -> tuple[list[float], list[float]]:
+    """The values of ``key`` in the seeds both groups have, in seed order."""
+    sa, sb = by_seed(a), by_seed(b)
+    seeds = sorted(set(sa) & set(sb))
+    return [key(sa[s]) for s in seeds], [key(sb[s]) for s in seeds]
+
+
+def failures(x: dict) -> float:
+    return float(x["failures"])
+
+
+def falls(x: dict) -> float:
+    return float(x["falls"])
+
+
+def best_eta(x: dict) -> float:
+    return float(x["best_eta"] or 0.0)
+
+
+def to_k(x: dict) -> tuple[float, bool]:
+    return (
+        (float(x["failures_before_k"]), False) if x["failures_before_k"] is not None else (float(x["failures"]), True)
+    )
+
+
+# --------------------------------------------------------------------------- the claims
+def claims(walker: str, groups: dict[str, list[Run]]) -> list[Claim]:
+    """The page's family of claims on one walker (fixed before the runs were read):
+
+    - sfl (at the gate's vigilance) fails less than random search (the thesis's claim; seeds pair: the same draws);
+    - for each optimiser and each of its gated groups: fewer failures than plain, fewer falls than plain, a best
+      eta different from plain's (paired by seed: the same seed's runs start from the same population and maps);
+      failures against sfl at the gate's vigilance (Welch); failures before 10 good gaits against sfl (a rank
+      test, censored runs taken against the claim).
+    """
+    out: list[Claim] = []
+    reference = f"sfl, s_vig {WALKERS[walker]['s_vig']:g}"
+    sfl = groups.get(reference, [])
+    if sfl and "random" in groups:
+        a, b = paired(sfl, groups["random"], failures)
+        if len(a) >= 2:
+            t = stats.paired_log_t(a, b)
+            out.append(
+                Claim(f"{walker}: sfl-random", f"{walker}: {reference} fails {_less(t)} than random", t, "ratio")
+            )
+    for kind in OPTIMISERS:
+        plain = groups.get(kind, [])
+        for label, gated in groups.items():
+            if not label.startswith(f"{kind} + gate"):
+                continue
+            if plain:
+                for what, key in (("fails", failures), ("falls", falls)):
+                    a, b = paired(gated, plain, key)
+                    if len(a) >= 2:
+                        t = stats.paired_log_t(a, b)
+                        out.append(
+                            Claim(
+                                f"{walker}: {label} {what}",
+                                f"{walker}: {label} {what} {_less(t)} than {kind}",
+                                t,
+                                "ratio",
+                            )
+                        )
+                a, b = paired(gated, plain, best_eta)
+                if len(a) >= 2 and min(a + b) > 0:
+                    t = stats.paired_log_t(a, b, shift=0.0)
+                    higher = "higher" if t.effect.estimate > 1 else "lower"
+                    out.append(
+                        Claim(
+                            f"{walker}: {label} eta",
+                            f"{walker}: {label}'s best eta is {higher} than {kind}'s",
+                            t,
+                            "ratio",
+                        )
+                    )
+            if len(sfl) >= 2 and len(gated) >= 2:
+                t = stats.welch_log_t([failures(r.metrics) for r in gated], [failures(r.metrics) for r in sfl])
+                out.append(
+                    Claim(
+                        f"{walker}: {label} vs sfl", f"{walker}: {label} fails {_less(t)} than {reference}", t, "ratio"
+                    )
+                )
+                g = [to_k(r.metrics) for r in gated]
+                s = [to_k(r.metrics) for r in sfl]
+                g_first = _median_to_k(g) <= _median_to_k(s)
+                first, second = (g, s) if g_first else (s, g)
+                t = stats.censored_rank_test(
+                    [v for v, _ in first], [c for _, c in first], [v for v, _ in second], [c for _, c in second]
+                )
+                who, other = (label, reference) if g_first else (reference, label)
+                out.append(
+                    Claim(
+                        f"{walker}: {label} to K vs sfl",
+                        f"{walker}: {who} finds {K_GOOD} good gaits after fewer failures than {other}",
+                        t,
+                        "difference of medians",
+                    )
+                )
+    return out
+
+
+def _less(test: stats.Test) -> str:
+    return "less" if test.effect.estimate < 1 else "more"
+
+
+def _median_to_k(values: list[tuple[float, bool]]) -> float:
+    m = stats.kaplan_meier_median([v for v, _ in values], [c for _, c in values])
+    return np.inf if m is None else m
+
+
+# --------------------------------------------------------------------------- the goals
+def goals(walker: str, groups: dict[str, list[Run]]) -> list[str]:
+    """The issue's goals, group by group: failures <= 0.5x plain and <= sfl's (means), best eta >= 0.98x plain in
+    every seed; 10 good gaits in >= 4 of 5 seeds with failures before 10 <= sfl's."""
+    reference = f"sfl, s_vig {WALKERS[walker]['s_vig']:g}"
+    sfl = groups.get(reference, [])
+    lines = [
+        f"| gated group | failures / plain's (mean) | failures / {reference}'s (mean) | best eta / plain's, per seed "
+        f"(min) | seeds reaching {K_GOOD} good gaits | failures before {K_GOOD}: mean over those seeds, "
+        f"{reference}'s |",
+        "|---|---|---|---|---|---|",
+    ]
+    sfl_f = np.mean([failures(r.metrics) for r in sfl]) if sfl else np.nan
+    sfl_k = [r.metrics["failures_before_k"] for r in sfl if r.metrics["failures_before_k"] is not None]
+    for kind in OPTIMISERS:
+        plain = groups.get(kind, [])
+        for label, gated in groups.items():
+            if not label.startswith(f"{kind} + gate"):
+                continue
+            gf = np.mean([failures(r.metrics) for r in gated])
+            pf = np.mean([failures(r.metrics) for r in plain]) if plain else np.nan
+            a, b = paired(gated, plain, best_eta)
+            ratios = [x / y for x, y in zip(a, b, strict=True) if y > 0]
+            reached = [r.metrics["failures_before_k"] for r in gated if r.metrics["failures_before_k"] is not None]
+            lines.append(
+                f"| {label} | {gf / pf:.2f} {'(<= 0.5: met)' if gf <= 0.5 * pf else '(> 0.5: not met)'} "
+                f"| {gf / sfl_f:.2f} {'(met)' if gf <= sfl_f else '(not met)'} "
+                f"| {' '.join(f'{x:.3f}' for x in ratios)} (min {min(ratios):.3f}: "
+                f"{'met' if ratios and min(ratios) >= 0.98 else 'not met'}) "
+                f"| {len(reached)} of {len(gated)} | "
+                + (f"{np.mean(reached):.1f}; " if reached else "-; ")
+                + (f"{np.mean(sfl_k):.1f} ({len(sfl_k)} of {len(sfl)} seeds)" if sfl_k else "-")
+                + " |"
+            )
+    return lines
+
+
+# --------------------------------------------------------------------------- the page
+def run_metrics_of(run: Run) -> RunMetrics:
+    success = np.array([bool(r["success"]) for r in run.rows if r.get("kind") == "trial"], dtype=bool)
+    return RunMetrics(run.name, run.status, run.reason, run.metrics, success, run.wall_s)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", type=Path, default=ROOT / "runs/baselines")
+    parser.add_argument("--page", type=Path, default=ROOT / "docs/results/baselines.md")
+    parser.add_argument("--figures", type=Path, default=ROOT / "docs/results/baselines")
+    args = parser.parse_args()
+    runs = read_runs(args.runs)
+    for r in runs:  # the target needs the plain runs' best eta first
+        r.metrics = safe_learning(r.rows, K_GOOD, DISTINCT)
+    targets = {}
+    for walker in WALKERS:
+        done = [r for r in runs if r.walker == walker and r.status == "completed" and r.metrics["trials"]]
+        targets[walker] = target_eta(done)
+        for r in runs:
+            if r.walker == walker:
+                r.metrics = safe_learning(r.rows, K_GOOD, DISTINCT, targets[walker])
+    args.figures.mkdir(parents=True, exist_ok=True)
+    sections, all_claims, panels, goal_lines = {}, [], {}, {}
+    settings = StudySettings()
+    for walker in WALKERS:
+        done = [r for r in runs if r.walker == walker and r.status == "completed" and r.metrics["trials"]]
+        if not done:
+            continue
+        groups = group(done)
+        sections[walker] = groups
+        all_claims += claims(walker, groups)
+        goal_lines[walker] = goals(walker, groups)
+        panels[walker] = {
+            label: [(failures(r.metrics), best_eta(r.metrics)) for r in rs] for label, rs in groups.items()
+        }
+        out = args.figures / walker
+        out.mkdir(exist_ok=True)
+        shown = {label: [run_metrics_of(r) for r in rs] for label, rs in groups.items()}
+        _curves_figure(shown, settings, out)
+        _eta_figure(shown, out)
+        _failures_figure(shown, settings, out)
+    tradeoff_figure({WALKERS[w]["title"].split(",")[0]: p for w, p in panels.items()}, args.figures / "tradeoff.png")
+    claim_lines, adjusted = claims_table(all_claims, ALPHA)
+    left_out = [r for r in runs if r.status != "completed" or not r.metrics["trials"]]
+    numbers = {
+        "targets": targets,
+        "claims": {
+            c.key: {
+                "says": c.says,
+                "test": c.test.name,
+                "p": c.test.p,
+                "holm_p": adjusted[c.key],
+                "effect": [c.test.effect.estimate, c.test.effect.low, c.test.effect.high],
+            }
+            for c in all_claims
+        },
+        "runs": {
+            f"{r.walker}/{r.name}": {
+                "label": r.label,
+                "seed": r.seed,
+                "status": r.status,
+                **{k: v for k, v in r.metrics.items() if not isinstance(v, list)},
+            }
+            for r in runs
+        },
+    }
+    (args.figures / "numbers.json").write_text(json.dumps(numbers, indent=1, default=float) + "\n")
+    args.page.write_text(page(sections, targets, claim_lines, goal_lines, left_out, args) + "\n")
+    print(f"wrote {args.page} and {args.figures}/")
+
+
+def page(sections, targets, claim_lines, goal_lines, left_out, args) -> str:
+    rel = args.figures.relative_to(args.page.parent)
+    text = [HEADER]
+    for walker, groups in sections.items():
+        text += [
+            f"## {WALKERS[walker]['title']}",
+            "",
+            f"The target eta is {targets[walker]:.3g}: the lower quartile of the plain optimisers' best etas on this "
+            "walker (three quarters of their runs reach it).",
+            "",
+            *groups_table(groups, targets[walker]),
+            "",
+            "The issue's goals, group by group (means over the seeds; best eta seed by seed):",
+            "",
+            *goal_lines[walker],
+            "",
+            f"![]({rel}/{walker}/study_learning.png)",
+            f"![]({rel}/{walker}/study_best_eta.png)",
+            f"![]({rel}/{walker}/study_failures_before_k.png)",
+            "",
+        ]
+    text += [
+        "## Failures against best eta",
+        "",
+        f"![]({rel}/tradeoff.png)",
+        "",
+        "## The comparisons and their tests",
+        "",
+        CLAIMS_TEXT,
+        "",
+        *claim_lines,
+        "",
+    ]
+    if left_out:
+        text += ["Left out of every number (did not complete):", ""]
+        text += [f"- {r.walker}/{r.name}: {r.status}, {r.reason}" for r in left_out]
+        text.append("")
+    text += [DISCUSSION]
+    return "\n".join(text)
+
+
+HEADER = """# Does the early warning make a good optimiser safe?
+
+(page written by `docs/experiments/baselines_page.py`; the text between the tables is kept in that script)
+"""
+CLAIMS_TEXT = """"""
+DISCUSSION = """"""
+
+if __name__ == "__main__":
+    main()
