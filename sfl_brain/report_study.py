@@ -471,43 +471,48 @@ def study_runs(folder: Path) -> tuple[list[Path], dict[str, str]]:
 # --------------------------------------------------------------------------- comparisons and claims
 def tradeoff_figure(panels: dict[str, dict[str, list[tuple[float, float]]]], path: Path) -> None:
     """Failures against best eta, one panel per walker: each group's mean (bootstrap 95 % intervals as bars) and its
-    seeds (small dots). ``panels``: walker -> group -> [(failures, best eta) per seed] (a run without a success has
-    best eta 0)."""
+    seeds (small dots); a group has the same colour and marker in every panel. ``panels``: walker -> group ->
+    [(failures, best eta) per seed] (a run without a success has best eta 0)."""
+    labels: list[str] = []
+    for groups in panels.values():
+        labels += [label for label in groups if label not in labels]
+    colours = dict(zip(labels, _colours(len(labels)), strict=True))
+    markers = dict(zip(labels, ("osD^v<>Pp*hX" * 4)[: len(labels)], strict=True))
     with plt.rc_context(STYLE):
-        fig, axes = plt.subplots(1, len(panels), figsize=(WIDTH_IN * (1.0 if len(panels) > 1 else 0.6), 3.6))
+        fig, axes = plt.subplots(1, len(panels), figsize=(WIDTH_IN, 3.4))
         axes = np.atleast_1d(axes)
         for ax, (walker, groups) in zip(axes, panels.items(), strict=True):
-            markers = "osD^v<>Pp*hX"
-            for i, (colour, (label, points)) in enumerate(zip(_colours(len(groups)), groups.items(), strict=True)):
+            for label, points in groups.items():
                 f = np.array([p[0] for p in points], dtype=float)
                 e = np.array([p[1] for p in points], dtype=float)
                 fi, ei = bootstrap_mean(f), bootstrap_mean(e)
-                ax.scatter(f, e, s=9, color=colour, alpha=0.45, lw=0)
+                ax.scatter(f, e, s=8, color=colours[label], alpha=0.4, lw=0)
+                spread = len(f) > 1 and not np.isnan(fi.low)
                 ax.errorbar(
                     fi.estimate,
                     ei.estimate,
-                    xerr=[[fi.estimate - fi.low], [fi.high - fi.estimate]] if len(f) > 1 else None,
-                    yerr=[[ei.estimate - ei.low], [ei.high - ei.estimate]] if len(e) > 1 else None,
-                    fmt=markers[i % len(markers)],
-                    color=colour,
-                    ms=6,
+                    xerr=[[fi.estimate - fi.low], [fi.high - fi.estimate]] if spread else None,
+                    yerr=[[ei.estimate - ei.low], [ei.high - ei.estimate]] if spread else None,
+                    fmt=markers[label],
+                    color=colours[label],
+                    ms=5,
                     capsize=2,
                     lw=1,
                     label=label,
                 )
             ax.set_xlabel("failures over the budget (trials)")
-            ax.set_ylabel(ETA_LABEL.replace(" so far", ""))
+            ax.set_ylabel("best eta (dimensionless)")
             ax.set_title(walker)
             ax.set_xlim(left=0)
-        handles, labels = axes[0].get_legend_handles_labels()
-        for ax in axes[1:]:
+        handles = {}
+        for ax in axes:
             for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
-                if lab not in labels:
-                    handles.append(h)
-                    labels.append(lab)
-        fig.legend(handles, labels, loc="lower center", ncol=3, frameon=False)
-        fig.suptitle("Failures against best eta: each group's mean and 95 % bootstrap intervals, its seeds as dots")
-        fig.tight_layout(rect=(0, 0.05 + 0.045 * ((len(labels) - 1) // 3 + 1), 1, 1))
+                handles.setdefault(lab, h)
+        fig.legend(list(handles.values()), list(handles), loc="lower center", ncol=2, frameon=False)
+        fig.suptitle("Failures against best eta: group means with 95 % bootstrap intervals, seeds as dots")
+        rows = (len(handles) + 1) // 2
+        fig.set_size_inches(WIDTH_IN, 3.4 + 0.17 * rows)
+        fig.tight_layout(rect=(0, 0.17 * rows / (3.4 + 0.17 * rows) + 0.02, 1, 1))
         fig.savefig(path, dpi=150)
         plt.close(fig)
 

@@ -92,3 +92,20 @@ def test_a_ratio_of_positive_values_is_tested_on_log_x():
     assert test.effect.estimate == pytest.approx(np.exp(np.mean(np.log(gated) - np.log(plain))))
     with pytest.raises(ValueError, match="positive"):
         stats.paired_log_t([0.0, 1.0], [1.0, 1.0], shift=0.0)
+
+
+def test_a_page_s_claims_are_holm_adjusted_and_a_failed_one_is_not_shown(tmp_path):
+    from sfl_brain.report_study import Claim, bounded_cell, censored_cell, claims_table, tradeoff_figure
+
+    strong = stats.paired_log_t([10, 14, 7, 9, 12], [40, 61, 22, 35, 55])
+    weak = stats.welch_log_t([18, 25, 15, 22, 19], [20, 30, 17, 25, 52])
+    lines, adjusted = claims_table(
+        [Claim("a", "gated fails less", strong, "ratio"), Claim("b", "gated fails less than sfl", weak, "ratio")]
+    )
+    assert adjusted["a"] == pytest.approx(2 * strong.p) and adjusted["a"] < 0.05 <= adjusted["b"]
+    assert "**holds**" in lines[2] and "not shown" in lines[3] and "Holm p (over 2)" in lines[0]
+    assert bounded_cell([0, 0, 1, 3, 40], ".1f").startswith("8.8 [0.") and bounded_cell([]) == "-"
+    assert censored_cell([3, 5, 8], [False] * 3).endswith("(all 3)")
+    assert censored_cell([3, 20, 30], [False, True, True]) == "1 of 3 reach it; never (median)"
+    tradeoff_figure({"planar": {"cma": [(40, 0.0105), (61, 0.0104)], "cma + gate": [(10, 0.0105)]}}, tmp_path / "t.png")
+    assert (tmp_path / "t.png").stat().st_size > 10_000

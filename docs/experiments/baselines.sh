@@ -40,7 +40,7 @@ if [ -z "${PAGE_ONLY:-}" ]; then
         humanoid/sfl)
           study humanoid sfl --vary modules.vigilance.params.value=0,-0.15
           study humanoid sfl_adaptive --set modules.vigilance.params.mode=adaptive ;;  # from -0.15, step 0.01
-        */plain) study "$body" plain --vary protocol.proposer.kind=random,cma,tpe,safe_bo ;;
+        */plain) study "$body" plain --vary protocol.proposer.kind=cma,tpe,safe_bo,random ;;
         */gated)
           study "$body" gated_cma --set "protocol.proposer=$GATED_CMA"
           study "$body" gated_tpe --set "protocol.proposer=$GATED_TPE"

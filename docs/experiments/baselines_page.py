@@ -343,9 +343,13 @@ def goals(walker: str, groups: dict[str, list[Run]]) -> list[str]:
             lines.append(
                 f"| {label} | {gf / pf:.2f} {'(<= 0.5: met)' if gf <= 0.5 * pf else '(> 0.5: not met)'} "
                 f"| {gf / sfl_f:.2f} {'(met)' if gf <= sfl_f else '(not met)'} "
-                f"| {' '.join(f'{x:.3f}' for x in ratios)} (min {min(ratios):.3f}: "
-                f"{'met' if ratios and min(ratios) >= 0.98 else 'not met'}) "
-                f"| {len(reached)} of {len(gated)} | "
+                + (
+                    f"| {' '.join(f'{x:.3f}' for x in ratios)} (min {min(ratios):.3f}: "
+                    f"{'met' if min(ratios) >= 0.98 else 'not met'}) "
+                    if ratios
+                    else "| - "
+                )
+                + f"| {len(reached)} of {len(gated)} | "
                 + (f"{np.mean(reached):.1f}; " if reached else "-; ")
                 + (f"{np.mean(sfl_k):.1f} ({len(sfl_k)} of {len(sfl)} seeds)" if sfl_k else "-")
                 + " |"
