@@ -19,8 +19,12 @@ SEEDS=${SEEDS:-0,1,2,3,4}
 BODIES=${BODIES:-planar humanoid}
 SETS=${SETS:-sfl plain gated}
 
-# the gated optimisers: the gate and how each keeps exploring behind it (docs/proposers.md, issue 33 item 2)
-GATED_CMA='{kind: cma, gate: veto}'
+# the gated optimisers (docs/proposers.md; issue 33 item 2, chosen on dev seeds 0, 1, 10, 11 of the planar walker:
+# CMA-ES resamples, a veto pushed its mean away from the efficient gaits near the failures; TPE vetoes, a resample
+# redraws TPE's same no-go corners; the safe optimiser vetoes, its classifier learns the no-go region); CMA-ES also
+# with restarts from novel gate-approved draws when its step size falls below the distinctness of two gaits (0.1)
+GATED_CMA='{kind: cma, gate: resample}'
+GATED_CMA_RESTARTS='{kind: cma, gate: resample, restart_below: 0.1, restart_from: novel}'
 GATED_TPE='{kind: tpe, gate: veto}'
 GATED_SAFE_BO='{kind: safe_bo, gate: veto}'
 
@@ -43,6 +47,7 @@ if [ -z "${PAGE_ONLY:-}" ]; then
         */plain) study "$body" plain --vary protocol.proposer.kind=cma,tpe,safe_bo,random ;;
         */gated)
           study "$body" gated_cma --set "protocol.proposer=$GATED_CMA"
+          study "$body" gated_cma_restarts --set "protocol.proposer=$GATED_CMA_RESTARTS"
           study "$body" gated_tpe --set "protocol.proposer=$GATED_TPE"
           study "$body" gated_safe_bo --set "protocol.proposer=$GATED_SAFE_BO" ;;
         *) echo "unknown set $set" >&2; exit 2 ;;
