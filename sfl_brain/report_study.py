@@ -323,7 +323,7 @@ def censored_cell(values, censored, digits: str = ".3g") -> str:
     if reached == n:
         return f"{bounded_cell(values, digits)} (all {n})"
     median = kaplan_meier_median(values, censored)
-    shown = "never (median)" if median is None else f"median {median:{digits}} (Kaplan-Meier)"
+    shown = "no median (under half reach it)" if median is None else f"median {median:{digits}} (Kaplan-Meier)"
     return f"{reached} of {n} reach it; {shown}"
 
 

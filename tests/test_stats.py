@@ -106,6 +106,6 @@ def test_a_page_s_claims_are_holm_adjusted_and_a_failed_one_is_not_shown(tmp_pat
     assert "**holds**" in lines[2] and "not shown" in lines[3] and "Holm p (over 2)" in lines[0]
     assert bounded_cell([0, 0, 1, 3, 40], ".1f").startswith("8.8 [0.") and bounded_cell([]) == "-"
     assert censored_cell([3, 5, 8], [False] * 3).endswith("(all 3)")
-    assert censored_cell([3, 20, 30], [False, True, True]) == "1 of 3 reach it; never (median)"
+    assert censored_cell([3, 20, 30], [False, True, True]) == "1 of 3 reach it; no median (under half reach it)"
     tradeoff_figure({"planar": {"cma": [(40, 0.0105), (61, 0.0104)], "cma + gate": [(10, 0.0105)]}}, tmp_path / "t.png")
     assert (tmp_path / "t.png").stat().st_size > 10_000

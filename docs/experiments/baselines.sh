@@ -17,7 +17,7 @@ OUT=${OUT:-runs/baselines}
 JOBS=${JOBS:-1}
 SEEDS=${SEEDS:-0,1,2,3,4}
 BODIES=${BODIES:-planar humanoid}
-SETS=${SETS:-sfl plain gated}
+SETS=${SETS:-sfl plain gated explore}
 
 # the gated optimisers (docs/proposers.md; issue 33 item 2, chosen on dev seeds 0, 1, 10, 11 of the planar walker:
 # CMA-ES resamples, a veto pushed its mean away from the efficient gaits near the failures; TPE vetoes, a resample
@@ -50,6 +50,14 @@ if [ -z "${PAGE_ONLY:-}" ]; then
           study "$body" gated_cma_restarts --set "protocol.proposer=$GATED_CMA_RESTARTS"
           study "$body" gated_tpe --set "protocol.proposer=$GATED_TPE"
           study "$body" gated_safe_bo --set "protocol.proposer=$GATED_SAFE_BO" ;;
+        planar/explore)  # what was tried to keep the gated optimisers exploring, on dev seeds (issue 33 item 2)
+          E="sfl study scenarios/baselines_planar.yaml --jobs $JOBS"
+          $E --seeds 0,1 --set protocol.proposer.kind=cma --vary protocol.proposer.gate=veto,resample \
+            --out "$OUT/planar_explore/cma"
+          $E --seeds 0,1 --set protocol.proposer.kind=tpe --vary protocol.proposer.gate=veto --out "$OUT/planar_explore/tpe"
+          $E --seeds 10,11 --set 'protocol.proposer={kind: cma, gate: resample, restart_below: 0.05, restart_from: novel}' \
+            --out "$OUT/planar_explore/cma_restarts_0.05" ;;
+        humanoid/explore) ;;
         *) echo "unknown set $set" >&2; exit 2 ;;
       esac
     done

@@ -114,10 +114,12 @@ def label_of(scenario: dict, walker: str) -> tuple[str, str, str]:
     return f"{kind} + gate ({', '.join([gate, *settings])})", "gated", kind
 
 
-def read_runs(runs: Path) -> list[Run]:
+def read_runs(runs: Path, layout: str = "{walker}") -> list[Run]:
+    """Every learn run under ``runs/<folder>/<study>/`` for each walker (``layout``: ``{walker}``, or
+    ``{walker}_explore`` for the dev seeds of what was tried)."""
     found = []
     for walker in WALKERS:
-        for scenario_file in sorted((runs / walker).glob("*/*/scenario.yaml")):
+        for scenario_file in sorted((runs / layout.format(walker=walker)).glob("*/*/scenario.yaml")):
             folder = scenario_file.parent
             if folder.parent.name == "attempts" or folder.parent.parent.name == "attempts":
                 continue
@@ -370,13 +372,14 @@ def main() -> None:
     parser.add_argument("--figures", type=Path, default=ROOT / "docs/results/baselines")
     args = parser.parse_args()
     runs = read_runs(args.runs)
-    for r in runs:  # the target needs the plain runs' best eta first
+    explored = read_runs(args.runs, "{walker}_explore")
+    for r in runs + explored:  # the target needs the plain runs' best eta first
         r.metrics = safe_learning(r.rows, K_GOOD, DISTINCT)
     targets = {}
     for walker in WALKERS:
         done = [r for r in runs if r.walker == walker and r.status == "completed" and r.metrics["trials"]]
         targets[walker] = target_eta(done)
-        for r in runs:
+        for r in runs + explored:
             if r.walker == walker:
                 r.metrics = safe_learning(r.rows, K_GOOD, DISTINCT, targets[walker])
     args.figures.mkdir(parents=True, exist_ok=True)
@@ -384,7 +387,7 @@ def main() -> None:
     settings = StudySettings()
     for walker in WALKERS:
         done = [r for r in runs if r.walker == walker and r.status == "completed" and r.metrics["trials"]]
-        if not done:
+        if not done or targets[walker] is None:
             continue
         groups = group(done)
         sections[walker] = groups
@@ -401,7 +404,11 @@ def main() -> None:
         _failures_figure(shown, settings, out)
     tradeoff_figure({WALKERS[w]["title"].split(",")[0]: p for w, p in panels.items()}, args.figures / "tradeoff.png")
     claim_lines, adjusted = claims_table(all_claims, ALPHA)
-    left_out = [r for r in runs if r.status != "completed" or not r.metrics["trials"]]
+    explore_groups = {
+        w: group([r for r in explored if r.walker == w and r.status == "completed" and r.metrics["trials"]])
+        for w in sections
+    }
+    left_out = [r for r in runs + explored if r.status != "completed" or not r.metrics["trials"]]
     numbers = {
         "targets": targets,
         "claims": {
@@ -415,33 +422,40 @@ def main() -> None:
             for c in all_claims
         },
         "runs": {
-            f"{r.walker}/{r.name}": {
+            f"{r.path.parent.parent.name}/{r.name}": {
                 "label": r.label,
                 "seed": r.seed,
                 "status": r.status,
                 **{k: v for k, v in r.metrics.items() if not isinstance(v, list)},
             }
-            for r in runs
+            for r in runs + explored
         },
     }
     (args.figures / "numbers.json").write_text(json.dumps(numbers, indent=1, default=float) + "\n")
-    args.page.write_text(page(sections, targets, claim_lines, goal_lines, left_out, args) + "\n")
+    args.page.write_text(page(sections, explore_groups, targets, claim_lines, goal_lines, left_out, args) + "\n")
     print(f"wrote {args.page} and {args.figures}/")
 
 
-def page(sections, targets, claim_lines, goal_lines, left_out, args) -> str:
+def seeds_of(groups: dict[str, list[Run]]) -> str:
+    return ", ".join(f"{label}: {' '.join(str(r.seed) for r in rs)}" for label, rs in groups.items())
+
+
+def page(sections, explore_groups, targets, claim_lines, goal_lines, left_out, args) -> str:
     rel = args.figures.relative_to(args.page.parent)
     text = [HEADER]
     for walker, groups in sections.items():
         text += [
             f"## {WALKERS[walker]['title']}",
             "",
+            WALKER_TEXT.get(walker, ""),
+            "",
             f"The target eta is {targets[walker]:.3g}: the lower quartile of the plain optimisers' best etas on this "
-            "walker (three quarters of their runs reach it).",
+            "walker (three quarters of their runs reach it). Seeds per group: " + seeds_of(groups) + ".",
             "",
             *groups_table(groups, targets[walker]),
             "",
-            "The issue's goals, group by group (means over the seeds; best eta seed by seed):",
+            "The issue's goals, group by group (means over the seeds; best eta seed by seed, against the plain "
+            "optimiser's run of the same seed). These are the goals' own yardsticks, not tests: the tests are below.",
             "",
             *goal_lines[walker],
             "",
@@ -462,6 +476,18 @@ def page(sections, targets, claim_lines, goal_lines, left_out, args) -> str:
         *claim_lines,
         "",
     ]
+    for walker, groups in explore_groups.items():
+        if groups:
+            text += [
+                f"## What was tried to keep the gated optimisers exploring ({walker} walker, dev seeds)",
+                "",
+                EXPLORE_TEXT,
+                "",
+                *groups_table(groups, targets[walker]),
+                "",
+                "Seeds: " + seeds_of(groups) + ".",
+                "",
+            ]
     if left_out:
         text += ["Left out of every number (did not complete):", ""]
         text += [f"- {r.walker}/{r.name}: {r.status}, {r.reason}" for r in left_out]
@@ -470,11 +496,12 @@ def page(sections, targets, claim_lines, goal_lines, left_out, args) -> str:
     return "\n".join(text)
 
 
+#: the page's text around the tables (kept here, so that the page is written whole by this script)
 HEADER = """# Does the early warning make a good optimiser safe?
-
-(page written by `docs/experiments/baselines_page.py`; the text between the tables is kept in that script)
 """
+WALKER_TEXT: dict[str, str] = {}
 CLAIMS_TEXT = """"""
+EXPLORE_TEXT = """"""
 DISCUSSION = """"""
 
 if __name__ == "__main__":
