@@ -314,7 +314,7 @@ def bounded_cell(values, digits: str = ".3g") -> str:
 
 def censored_cell(values, censored, digits: str = ".3g") -> str:
     """Counts to an event some runs never reached (``censored``; their value a lower bound): how many reached it, and
-    the mean with its bootstrap interval when all did, else the Kaplan-Meier median (``never`` when under half
+    the mean with its bootstrap interval when all did, else the Kaplan-Meier median (none when under half
     did)."""
     values, censored = list(values), [bool(c) for c in censored]
     n, reached = len(values), censored.count(False)
