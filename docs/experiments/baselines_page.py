@@ -498,10 +498,70 @@ def page(sections, explore_groups, targets, claim_lines, goal_lines, left_out, a
 
 #: the page's text around the tables (kept here, so that the page is written whole by this script)
 HEADER = """# Does the early warning make a good optimiser safe?
+
+The thesis's contribution is the early warning: success and failure maps with a go/no-go decision (d_f - d_s >
+s_vig, eq. 3.3). Success-failure learning (`sfl`) puts it in front of uniform random draws. The optimisers CMA-ES,
+TPE and a safe Bayesian optimiser find good gaits sooner and better gaits than `sfl` (issue 22), but fail more. This
+page asks whether the same early warning, put in front of those optimisers (`protocol.proposer.gate`,
+[`docs/proposers.md`](../proposers.md)), makes them safe without costing them the gaits they find. Issue 33.
+
+Made by `bash docs/experiments/baselines.sh`: one `sfl study` per group set on each walker, then
+`docs/experiments/baselines_page.py` writes this page, its figures and `baselines/numbers.json` (every run's
+metrics, every claim's test) from the run folders. On the 2-core VM, one run at a time, the machine shared with two
+other engineers' experiments (load 10-17): wall times are not comparable and are not shown.
+
+**Groups.** `sfl` at a sweep of fixed vigilance (and, on the humanoid, adaptive vigilance from -0.15, §5.6.3);
+CMA-ES, TPE and the safe optimiser (`safe_bo`) each plain (`gate: off`) and gated. A gated group runs at the walker's
+own vigilance (planar 0, humanoid -0.15), the one its `sfl` reference group runs at; its label says the gate's mode
+and any other setting that is not the default. `random` (uniform draws, no gate) is shown where it was run.
+
+**How to read the tables.** A *failure* is any unsuccessful trial: on the planar walker that is a fall or a stall
+(standing after 10 s but under 0.5 m or 4 steps forward), on the humanoid a fall or leaving the lane before the
+finish line. A *fall* is a trial whose body reports `fell` (`m_fell`). A *good gait* is a success at least 0.1 from
+every good gait found before it (unit cube); "failures before 10 good gaits" counts the failures before the tenth.
+"Failures before eta T" counts the failures before the first success whose eta reaches the walker's target T. Runs
+that never got there are censored: the cell says how many runs reached it, with the mean when all did and the
+Kaplan-Meier median otherwise (none when fewer than half did); a censored run is never averaged as if it had. Each
+other value is the mean over the seeds with its 95 % percentile bootstrap interval (10 000 resamples): it stays within
+the values' range (never below 0 for a count), but with five seeds it is narrower than a 95 % interval should be, so
+it describes the spread; the tests below decide. "Tried where the gate says no-go" counts trials whose own decision
+was a no-go: for a plain optimiser, every trial success-failure learning would have refused (its records now say it:
+`go` is the gate's real decision for every proposer); for a gated one, trials tried after its veto budget was spent.
+
+**The decision budget.** Every decision is one ACC evaluation (a request to the ACC process, 3-8 ms), free on the
+body: only tried points are trials. The last column gives them per trial: `sfl` draws until the gate says go, so it
+makes many per trial, and more the more cautious its vigilance; a plain optimiser makes one (the gate's decision is
+recorded, not obeyed); a gated one makes one plus one per veto or redraw (at most `max_vetoes` = 100, then the point is
+tried whatever the gate says), and CMA-ES with novel restarts 64 more per restart.
+
+**The maps start at random weights.** Both maps are seeded with random weights in the unit cube, so the gate decides
+from the very first draw: a first decision can be a no-go (the thesis's maps start the same way), and a run of `sfl`
+and a run of `random` from the same seed part at the first draw the gate refuses.
 """
 WALKER_TEXT: dict[str, str] = {}
-CLAIMS_TEXT = """"""
-EXPLORE_TEXT = """"""
+CLAIMS_TEXT = """Every comparison this page makes is here, fixed in `baselines_page.py::claims` before the runs were
+read: on each walker, `sfl` against random search (where random ran), and for each gated group against its plain
+optimiser (failures, falls, best eta) and against `sfl` at the same vigilance (failures, failures before 10 good
+gaits). Seeds pair between a gated group and its plain optimiser (the same seed starts both from the same population
+or draws, the same maps and the same trial noise), so those are paired t-tests on the log scale: log(x + 1) for
+counts, log eta for best eta; the effect is the ratio of geometric means, its interval from the log scale (always
+positive). Against `sfl` the seeds do not pair (another proposer): Welch's t-test on log(x + 1). Failures before 10
+good gaits has censored runs: a Mann-Whitney test with every censored run taken where it hurts the claim (see
+`sfl_brain/stats.py`); with five seeds its p cannot go below 0.008. The p-values are two-sided, and Holm's step-down
+adjustment runs over every claim of the page; a claim **holds** when its adjusted p is below 0.05. One that does not
+is *not shown*, and the text does not make it."""
+EXPLORE_TEXT = """Each was run on two seeds before the final groups were chosen: veto or resample on seeds 0 and 1,
+which are also seeds of the final groups (their runs are the same, so the choice saw two of the five seeds), the
+first restarts on seeds 10 and 11. Gated CMA-ES with `veto` told every vetoed point to the strategy as a failure:
+its mean moved away from the no-go region and with it from the most efficient gaits, which on the planar walker lie
+close to failures (in a plain CMA-ES run the best gaits were no-go decisions at s_vig 0, d_f - d_s -0.06 to -0.004);
+its best eta fell to 0.73-0.84x. With `resample` the strategy is told nothing of the gate, keeps its own path and
+reaches the plain optimiser's best eta. TPE with `resample` redraws from a model that learnt nothing of the refusal:
+on the analytic body and in the unit tests its every redraw fell in the same no-go corner until the budget was spent
+(`tests/test_gate.py`), and it was not run on the walkers; with `veto` the refused corner enters TPE's worse group.
+Restarts of CMA-ES (`restart_below` 0.05, `restart_from: novel`) restarted once per run at that threshold, late
+(trial 149 in seed 10), and found one or two more gaits; the final group restarts when the step size falls below the
+gaits' distinctness (0.1)."""
 DISCUSSION = """"""
 
 if __name__ == "__main__":
