@@ -432,7 +432,8 @@ def main() -> None:
         },
     }
     (args.figures / "numbers.json").write_text(json.dumps(numbers, indent=1, default=float) + "\n")
-    args.page.write_text(page(sections, explore_groups, targets, claim_lines, goal_lines, left_out, args) + "\n")
+    said = summary(sections, {c.key: c for c in all_claims}, adjusted)
+    args.page.write_text(page(sections, explore_groups, targets, claim_lines, goal_lines, said, left_out, args) + "\n")
     print(f"wrote {args.page} and {args.figures}/")
 
 
@@ -440,7 +441,56 @@ def seeds_of(groups: dict[str, list[Run]]) -> str:
     return ", ".join(f"{label}: {' '.join(str(r.seed) for r in rs)}" for label, rs in groups.items())
 
 
-def page(sections, explore_groups, targets, claim_lines, goal_lines, left_out, args) -> str:
+def summary(sections: dict, by_key: dict[str, Claim], adjusted: dict[str, float]) -> list[str]:
+    """What the page says, group by group, each comparison with its verdict (computed: never a claim its test does
+    not carry; the direction of each is the claims table's)."""
+
+    def verdict(key: str) -> str:
+        if key not in by_key:
+            return "untested"
+        holds = adjusted[key] < ALPHA
+        return f"{'holds' if holds else 'not shown'}, Holm p = {adjusted[key]:.2g}"
+
+    lines = ["## What this says", ""]
+    for walker, groups in sections.items():
+        reference = f"sfl, s_vig {WALKERS[walker]['s_vig']:g}"
+        sfl = groups.get(reference, [])
+        s_f = np.mean([failures(r.metrics) for r in sfl]) if sfl else np.nan
+        s_k = sum(r.metrics["failures_before_k"] is not None for r in sfl)
+        lines.append(f"On the {walker} walker:")
+        lines.append("")
+        if sfl and "random" in groups:
+            r_f = np.mean([failures(r.metrics) for r in groups["random"]])
+            lines.append(
+                f"- {reference} fails {s_f:.1f} times on average against random search's {r_f:.1f} "
+                f"({verdict(f'{walker}: sfl-random')})."
+            )
+        for kind in OPTIMISERS:
+            plain = groups.get(kind, [])
+            for label, gated in groups.items():
+                if not label.startswith(f"{kind} + gate") or not plain:
+                    continue
+                g_f, p_f = (np.mean([failures(r.metrics) for r in rs]) for rs in (gated, plain))
+                g_l, p_l = (np.mean([falls(r.metrics) for r in rs]) for rs in (gated, plain))
+                a, b = paired(gated, plain, best_eta)
+                ratios = [x / y for x, y in zip(a, b, strict=True) if y > 0]
+                g_k = sum(r.metrics["failures_before_k"] is not None for r in gated)
+                text = (
+                    f"- **{label}**: {g_f:.1f} failures against {kind}'s {p_f:.1f} ({g_f / p_f:.2f}x: "
+                    f"{verdict(f'{walker}: {label} fails')}) and {reference}'s {s_f:.1f} "
+                    f"({verdict(f'{walker}: {label} vs sfl')}); {g_l:.1f} falls against {p_l:.1f} "
+                    f"({verdict(f'{walker}: {label} falls')}); best eta {np.mean(a):.3g} against {np.mean(b):.3g}, "
+                    f"{min(ratios):.3f}-{max(ratios):.3f}x seed by seed (a difference: "
+                    f"{verdict(f'{walker}: {label} eta')}); {K_GOOD} good gaits in {g_k} of {len(gated)} seeds, "
+                    f"{reference} in {s_k} of {len(sfl)} (after fewer failures: "
+                    f"{verdict(f'{walker}: {label} to K vs sfl')})."
+                )
+                lines.append(text)
+        lines.append("")
+    return lines
+
+
+def page(sections, explore_groups, targets, claim_lines, goal_lines, said, left_out, args) -> str:
     rel = args.figures.relative_to(args.page.parent)
     text = [HEADER]
     for walker, groups in sections.items():
@@ -492,7 +542,7 @@ def page(sections, explore_groups, targets, claim_lines, goal_lines, left_out, a
         text += ["Left out of every number (did not complete):", ""]
         text += [f"- {r.walker}/{r.name}: {r.status}, {r.reason}" for r in left_out]
         text.append("")
-    text += [DISCUSSION]
+    text += [*said, DISCUSSION]
     return "\n".join(text)
 
 
