@@ -77,8 +77,11 @@ class Axis(Strict):
 class ModuleSpec(Strict):
     impl: str = Field(description="registered name, 'package.module:Class' or 'path/file.py:Class'")
     params: dict[str, Any] = {}
-    restart: Literal["never", "on-failure"] = Field(
-        "never", description="on-failure: restart a body worker or controller that dies (not brain modules)"
+    restart: Literal["never", "on-failure"] | None = Field(
+        None,
+        description="on-failure: restart a body worker or controller that dies or hangs, and retry its trial (the "
+        "default for them: they hold no state between trials); never: its death fails the run (the default, and the "
+        "only choice, for brain modules, whose learnt state a restart would lose)",
     )
     max_restarts: int = Field(3, ge=0, le=100)
     workers: int = Field(1, ge=1, le=64, description="bodies: processes serving trials in parallel")
@@ -310,14 +313,41 @@ class Record(Strict):
 
 
 class Timeouts(Strict):
-    ready: float = Field(60.0, gt=0, description="s for every module to come alive")
-    request: float = Field(30.0, gt=0, description="s for a brain module to answer")
-    trial: float = Field(300.0, gt=0, description="s of wall time for one trial")
+    """How long a run waits. A module process on this machine is waited for while it makes progress or is denied the
+    CPU: each of these times counts only the time it had the CPU and did nothing with it (sfl_brain.liveness), so a
+    busy machine, a nice level, a stop and continue (SIGSTOP/SIGCONT, a suspended laptop) make a run slower, never
+    fail it. Past its time, a process is hung."""
+
+    ready: float = Field(
+        60.0,
+        gt=0,
+        description="s a module process may have the CPU without coming alive (and `sfl check`: s of wall time for "
+        "importing a module's implementation)",
+    )
+    request: float = Field(
+        30.0,
+        gt=0,
+        description="s a brain module may have the CPU without answering a request: it is hung, the run fails naming "
+        "it (`sfl run --resume RUN_DIR` goes on)",
+    )
+    trial: float = Field(
+        300.0,
+        gt=0,
+        description="s a body worker and its controller process may have the CPU without a tick: hung, killed and "
+        "restarted, the trial retried; for a worker on another machine (sfl worker), s of wall time for one trial",
+    )
     tick: float = Field(
         10.0,
         gt=0,
-        description="s of wall time for a controller to answer one tick (or a reset); "
-        "a trial whose controller is later than this is interrupted and retried",
+        description="s a controller process may have the CPU without answering one tick (or a reset): hung, the trial "
+        "is interrupted and retried, the controller restarted",
+    )
+    lease: float = Field(
+        3.0,
+        ge=0.5,
+        le=3600,
+        description="s a worker on another machine (sfl worker) may be silent before the run gives it up and retries "
+        "its trial elsewhere (its Zenoh lease: a process there cannot be seen, only heard)",
     )
 
 
@@ -1106,6 +1136,14 @@ def _best_of(folder: str, base_dir: Path) -> dict | str:
     return {k: v for k, v in best["neuron_point"].items() if k != "v_unit" and isinstance(v, int | float)}
 
 
+def restart_policy(spec: ModuleSpec, cls: type[Module]) -> str:
+    """A module's ``restart`` policy: as the scenario says, else ``on-failure`` for body workers and controllers (they
+    hold no state between trials: a restart loses nothing) and ``never`` for brain modules (learnt state)."""
+    if spec.restart is not None:
+        return spec.restart
+    return "on-failure" if issubclass(cls, Body | Controller) else "never"
+
+
 def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
     raw, problems = learnt_values(raw, base_dir)
     if problems:
@@ -1334,7 +1372,7 @@ def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
                 reference,
                 params,
                 instance_seed(scenario.seed, name),
-                spec.restart,
+                restart_policy(spec, cls),
                 spec.max_restarts,
                 dict(routes),
             )
@@ -1351,7 +1389,7 @@ def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
                         cref,
                         cparams,
                         instance_seed(scenario.seed, controller_name),
-                        cspec.restart,
+                        restart_policy(cspec, ccls),
                         cspec.max_restarts,
                         {m.MotorCommand.TAG: inst_name},
                     )
