@@ -14,6 +14,7 @@ from rerun.chunk import RrdReader
 
 from sfl_brain import bus
 from sfl_brain.local import run_local
+from sfl_brain.provenance import describe_platform
 from sfl_brain.records import read_records
 from sfl_brain.scenario import load
 
@@ -88,7 +89,10 @@ def test_learn_run_records_everything_and_matches_in_process(tmp_path):
     assert "| run | completed | learn | 0.0 | 60 |" in table
     made = json.loads((out / "provenance.json").read_text())  # the report says what made the run, and when
     assert f"Runs made at `{(made['commit'] or 'no git commit')[:7]}`" in table
-    assert f"started {made['started'][:10]}." in table
+    platform = describe_platform(made["numeric_platform"])  # and on what its floats were computed
+    assert f"started {made['started'][:10]}, on {platform}." in table and platform.startswith(
+        made["numeric_platform"]["machine"]
+    )
 
 
 def test_sfl_list_names_every_registered_implementation():
