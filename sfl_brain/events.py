@@ -96,6 +96,15 @@ class Restarted:
 
 
 @dataclass(frozen=True)
+class PlacementYielded:
+    """``pin_cpus: auto``: other work came to keep a pair's core busy (``busy``: which, how much), so the run's
+    processes were placed again (``placement``: the new placement's line)."""
+
+    busy: str
+    placement: str
+
+
+@dataclass(frozen=True)
 class WorkerJoined:
     """A body worker started elsewhere (``sfl worker``) joined the run."""
 

@@ -41,6 +41,7 @@ from .events import (
     ModuleHung,
     ModuleSilent,
     ModuleStopped,
+    PlacementYielded,
     Progress,
     ProgressUpdated,
     Restarted,
@@ -320,6 +321,10 @@ def tell(events: Events) -> None:
             print(f"sfl: module `{e.name}` runs again", file=sys.stderr)
 
     events.subscribe(ModuleStopped, stopped)
+    events.subscribe(
+        PlacementYielded,
+        lambda e: print(f"sfl: other work keeps {e.busy} busy: the placement yields; {e.placement}", flush=True),
+    )
     events.subscribe(
         TrialInterrupted, lambda e: print(f"sfl: trial {e.trial} interrupted ({e.reason}); retrying", flush=True)
     )

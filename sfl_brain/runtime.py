@@ -59,6 +59,7 @@ from .events import (
     ModuleHung,
     ModuleSilent,
     ModuleStopped,
+    PlacementYielded,
     Restarted,
     WorkerJoined,
     WorkerLeft,
@@ -66,7 +67,7 @@ from .events import (
 from .host import WATCHED_WAIT, ControllerHung, LinkError
 from .liveness import NoProgressClock, ProgressBoard, cpu_sample
 from .messages import Message, MessageError, NonFiniteError, SensorFrame, decode, encode
-from .placement import Pair, Placement, place, usable_cpus
+from .placement import BUSY, CoreWatch, Pair, Placement, core_load, pin_process, place, usable_cpus
 from .processes import Child, Exited, kill_quietly, log_tail
 from .scenario import Instance, Plan
 from .service import Interrupted, Outcome, RunError
@@ -171,6 +172,15 @@ def watched_units(plan: Plan) -> dict[str, tuple[str, ...]]:
     return units
 
 
+def initial_placement(plan: Plan) -> Placement:
+    """The run's placement (:func:`sfl_brain.placement.place`) on the cores it may use; with ``pin_cpus: auto`` and
+    a pair to place on more than one core, after measuring what other work keeps each core busy with."""
+    pairs, others = lockstep_pairs(plan)
+    mode, cpus = plan.scenario.lockstep.pin_cpus, usable_cpus()
+    measure = mode == "auto" and len(cpus) > 1 and any(p.controller is not None for p in pairs)
+    return place(pairs, others, cpus, mode, core_load(cpus) if measure else None)
+
+
 def hosted_spec(inst: Instance | None) -> dict | None:
     """How a host builds a module it runs in-process (a controller colocated with its body)."""
     if inst is None:
@@ -228,11 +238,14 @@ class Supervisor:
         self._drops.counts = self.dropped
         self._token = None
         #: each body worker and its controller process on a core of their own, as lockstep.pin_cpus says
-        self.placement: Placement = place(*lockstep_pairs(plan), usable_cpus(), plan.scenario.lockstep.pin_cpus)
+        self.placement: Placement = initial_placement(plan)
+        #: what other work keeps the pairs' cores busy with while the run goes on (``auto``: the placement yields)
+        self._core_watch = CoreWatch(self.placement.usable) if self.placement.mode == "auto" else None
         #: the run's private folder (only this user may enter): the lockstep links' sockets, the progress board
         self.private: str | None = None
         self.tick_folder: str | None = None
         self.ticks: dict[str, dict[str, list[str]]] = {}
+        self._ticks_on = ""
         #: what each module process got done (:mod:`sfl_brain.liveness`), and how the run judges them
         self.board: ProgressBoard | None = None
         self.units = watched_units(plan)
@@ -340,11 +353,24 @@ class Supervisor:
                 links = f"lockstep links ({kind}) in {self.tick_folder}"
             else:
                 links = f"the mesh (the temporary folder {self.tick_folder} is too long a path for a Unix socket)"
-        placed = self.placement.to_json() | {"lockstep_links": self.ticks, "ticks_on": links}
-        (self.run_dir / "logs" / "placement.json").write_text(json.dumps(placed, indent=1) + "\n")
+        self._ticks_on = links
+        self._write_placement()
         log.info("%s; ticks on %s", self.placement.describe(), links)
         if pairs:
             print(f"sfl: {self.placement.describe()}", flush=True)
+
+    def _write_placement(self) -> None:
+        """``logs/placement.json``: where each process runs now, and each placement before it (``earlier``)."""
+        path = self.run_dir / "logs" / "placement.json"
+        earlier = []
+        if path.exists():
+            try:
+                old = json.loads(path.read_text())
+                earlier = old.pop("earlier", []) + [{k: old[k] for k in ("cores", "reason", "load") if k in old}]
+            except (OSError, ValueError):
+                earlier = []
+        placed = self.placement.to_json() | {"lockstep_links": self.ticks, "ticks_on": self._ticks_on}
+        path.write_text(json.dumps(placed | ({"earlier": earlier} if earlier else {}), indent=1) + "\n")
 
     def listen_for_children(self) -> list[str]:
         host = "127.0.0.1"
@@ -564,6 +590,36 @@ class Supervisor:
                 (self._stopped.add if stopped else self._stopped.discard)(name)
                 self.events.publish(ModuleStopped(name, stopped))
 
+    def _yield_cores(self) -> None:
+        """``pin_cpus: auto``: every :data:`~sfl_brain.placement.RECHECK_S` s, what other work keeps each core busy
+        with (the cores' busy time less this run's pinned processes'); a pair's core busier than
+        :data:`~sfl_brain.placement.BUSY` makes the placement yield: placed again on the load now (the pair moves to a
+        quiet core, or nothing stays pinned), every process moved, and the user told."""
+        watch = self._core_watch
+        if watch is None or not self.placement.cores or not watch.due():
+            return
+        used: dict[int, float] = {}
+        for name, cores in self.placement.cores.items():
+            child = self.children.get(name)
+            sample = cpu_sample(child.proc.pid) if child is not None and child.proc is not None else None
+            if sample is not None and len(cores) == 1:
+                used[cores[0]] = used.get(cores[0], 0.0) + sample.cpu
+        load = watch.sample(used)
+        pairs, others = lockstep_pairs(self.plan)
+        paired = {n for p in pairs if p.controller is not None for n in (p.body, p.controller)}
+        pair_cores = {c for name, cores in self.placement.cores.items() if name in paired for c in cores}
+        trapped = sorted(c for c in pair_cores if load is not None and load.get(c, 0.0) > BUSY)
+        if not trapped:
+            return
+        before = self.placement
+        self.placement = place(pairs, others, list(before.usable), before.mode, load)
+        for name, child in self.children.items():
+            if child.proc is not None and before.of(name) != self.placement.of(name):
+                pin_process(child.proc.pid, self.placement.of(name) or before.usable)
+        busy = ", ".join(f"core {c} {load[c]:.0%}" for c in trapped)
+        self.events.publish(PlacementYielded(busy, self.placement.describe()))
+        self._write_placement()
+
     def _waited_on(self) -> dict[tuple[str, ...], tuple[float, str, str, tuple[int, ...]]]:
         """The groups of processes (:func:`watched_units`) the run waits on now, each with its time (s of CPU without
         progress), that time's scenario key, what it is doing, and the requests it works on: those with a request in
@@ -661,6 +717,7 @@ class Supervisor:
                 return []
             self._handle(self._next_event(WATCH_PERIOD if remaining is None else min(WATCH_PERIOD, remaining)))
             self._watch()
+            self._yield_cores()
 
     def workers(self) -> list[str]:
         """Body workers that can run a trial now (launched and joined from elsewhere): alive, and
