@@ -50,7 +50,7 @@ MODES = ("never", "auto", "always")
 BUSY = 0.5
 
 #: s that :func:`core_load` watches the cores before a run places its processes
-MEASURE_S = 0.2
+MEASURE_S = 0.3
 
 #: s between two looks at the pairs' cores while a run goes on (:class:`CoreWatch`)
 RECHECK_S = 5.0
