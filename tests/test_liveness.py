@@ -212,3 +212,45 @@ def test_a_body_worker_that_spins_in_a_trial_is_killed_restarted_and_its_trial_r
     assert retry["trial"] == 3 and retry["attempt"] == 1 and "hung" in retry["reason"], retry
     clean = run_local(load(LEARN, sets))
     assert stable([r for r in rows if r["kind"] != "retry"]) == stable(clean)
+
+
+SPINS_AT_START = """
+from sfl_brain.modules.vigilance import Vigilance
+
+
+class SpinsAtStart(Vigilance):
+    def reset(self, seed):
+        while True:  # never comes alive
+            pass
+"""
+
+
+def test_a_module_that_spins_before_it_comes_alive_fails_the_start_naming_it(tmp_path):
+    (tmp_path / "spins.py").write_text(SPINS_AT_START)
+    out = tmp_path / "run"
+    sets = [f"modules.vigilance.impl={tmp_path / 'spins.py'}:SpinsAtStart", "timeouts.ready=3"]
+    proc = start_run(LEARN, out, *sets)
+    _, stderr = proc.communicate(timeout=180)
+    assert proc.returncode == 1, stderr
+    reason = json.loads((out / "summary.json").read_text())["stop_reason"]
+    assert reason.startswith("modules not ready: module `vigilance` is hung: for ") and "coming alive" in reason, reason
+    assert "(timeouts.ready is 3 s)" in reason
+
+
+def test_the_supervisor_stopped_and_continued_goes_on_with_its_run(tmp_path):
+    """Ctrl-Z on ``sfl run`` (SIGSTOP of the supervisor alone: its modules run in sessions of their own) for longer
+    than the 3-s lease its modules used to hold it to, then ``fg``: the run goes on with a quiet run's records."""
+    out = tmp_path / "run"
+    sets = ["protocol.trials=60"]
+    proc = start_run(LEARN, out, *sets)
+    try:
+        wait_for_trials(out, 10, proc)
+        proc.send_signal(signal.SIGSTOP)
+        with pytest.raises(subprocess.TimeoutExpired):
+            proc.wait(timeout=5)  # stopped: it cannot end
+        proc.send_signal(signal.SIGCONT)
+        _, stderr = proc.communicate(timeout=180)
+        assert proc.returncode == 0, stderr
+    finally:
+        proc.kill()
+    assert stable(read_records(out)) == stable(run_local(load(LEARN, sets)))
