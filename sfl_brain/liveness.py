@@ -71,7 +71,8 @@ class ProgressBoard:
 
 class ProgressSlot:
     """A host's slot on the board: it writes its pid once and bumps its count for every request answered and every
-    lockstep tick (a write to shared memory, no system call). Also reads another slot (a body its controller's)."""
+    lockstep tick (a write to shared memory, no system call). Also reads another slot (a body its controller's). It
+    stays mapped until the process exits: a lockstep thread still returning may count a tick."""
 
     def __init__(self, path: str | Path, slot: int) -> None:
         self._file = open(path, "r+b")  # noqa: SIM115 - kept while the host serves
@@ -87,11 +88,6 @@ class ProgressSlot:
     def pid_of(self, slot: int) -> int:
         """The pid written in ``slot`` (0 before its process started)."""
         return SLOT.unpack_from(self._map, SLOT.size * slot)[0]
-
-    def close(self) -> None:
-        self._count.release()
-        self._map.close()
-        self._file.close()
 
 
 @dataclass(frozen=True)
@@ -208,12 +204,3 @@ class NoProgressClock:
 
     def reset(self) -> None:
         self.seconds, self._marks, self._last, self._first = 0.0, None, None, None
-
-
-def describe_state(sample: CpuSample | None) -> str:
-    """A process state for a log line."""
-    if sample is None:
-        return "gone"
-    return {"T": "stopped", "t": "stopped (traced)", "D": "waiting on the machine", "R": "running"}.get(
-        sample.state, "sleeping"
-    )
