@@ -23,7 +23,7 @@ from sfl_brain.placement import usable_cpus
 from sfl_brain.records import read_records
 from sfl_brain.scenario import load
 
-from .conftest import ROOT, SCENARIOS, Lines, poll_until, wait_for_trials
+from .conftest import SCENARIOS, Lines, poll_until, start_sfl_run, wait_for_trials
 from .test_faults import module_process
 
 WALKER = SCENARIOS / "quickstart.yaml"
@@ -33,19 +33,6 @@ VOLATILE = {"wall_ms", "worker"}
 
 def stable(rows):
     return [{k: v for k, v in r.items() if k not in VOLATILE} for r in rows]
-
-
-def start_run(scenario, out, *sets: str, nice: int = 0) -> subprocess.Popen:
-    """``sfl run`` in the background (at ``nice``), its output on text pipes."""
-    settings = [arg for s in sets for arg in ("--set", s)]
-    return subprocess.Popen(
-        [sys.executable, "-m", "sfl_brain.cli", "run", str(scenario), *settings, "--out", str(out), "--quiet"],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        preexec_fn=(lambda: os.nice(nice)) if nice else None,
-    )
 
 
 # ---------------------------------------------------------------- the clock
@@ -96,7 +83,7 @@ def test_a_controller_stopped_mid_trial_longer_than_its_tick_time_out_resumes_th
     with no trial retried."""
     out = tmp_path / "run"
     sets = ["protocol.trials=8", "modules.body.params.duration=3", "record.body_every=0", "timeouts.tick=1"]
-    proc = start_run(WALKER, out, *sets)
+    proc = start_sfl_run(WALKER, out, *sets)
     stderr = Lines(proc.stderr)
     try:
         wait_for_trials(out, 2, proc)
@@ -133,7 +120,7 @@ def test_a_run_at_nice_10_beside_more_busy_processes_than_cores_gives_a_quiet_ru
         "timeouts.tick=0.2",
         "timeouts.request=0.5",
     ]
-    proc = start_run(WALKER, out, *sets, nice=10)
+    proc = start_sfl_run(WALKER, out, *sets, preexec_fn=lambda: os.nice(10))
     loops = []
     try:
         wait_for_trials(out, 1, proc)
@@ -187,7 +174,7 @@ def test_a_brain_module_that_loops_forever_in_a_handler_fails_the_run_naming_it(
     (tmp_path / "hung.py").write_text(HUNG_VIGILANCE)
     out = tmp_path / "run"
     sets = ["protocol.trials=10", f"modules.vigilance.impl={tmp_path / 'hung.py'}:HungVigilance", "timeouts.request=2"]
-    proc = start_run(LEARN, out, *sets)
+    proc = start_sfl_run(LEARN, out, *sets)
     _, stderr = proc.communicate(timeout=180)
     assert proc.returncode == 1, stderr
     reason = json.loads((out / "summary.json").read_text())["stop_reason"]
@@ -202,7 +189,7 @@ def test_a_body_worker_that_spins_in_a_trial_is_killed_restarted_and_its_trial_r
     (tmp_path / "hung_body.py").write_text(HUNG_BODY)
     out = tmp_path / "run"
     sets = ["protocol.trials=8", "timeouts.trial=2"]
-    proc = start_run(LEARN, out, *sets, f"modules.body.impl={tmp_path / 'hung_body.py'}:HungOnce")
+    proc = start_sfl_run(LEARN, out, *sets, f"modules.body.impl={tmp_path / 'hung_body.py'}:HungOnce")
     _, stderr = proc.communicate(timeout=180)
     assert proc.returncode == 0, stderr
     assert "module `body` is hung: for " in stderr and "did not finish answering `body.trial`" in stderr, stderr
@@ -229,7 +216,7 @@ def test_a_module_that_spins_before_it_comes_alive_fails_the_start_naming_it(tmp
     (tmp_path / "spins.py").write_text(SPINS_AT_START)
     out = tmp_path / "run"
     sets = [f"modules.vigilance.impl={tmp_path / 'spins.py'}:SpinsAtStart", "timeouts.ready=3"]
-    proc = start_run(LEARN, out, *sets)
+    proc = start_sfl_run(LEARN, out, *sets)
     _, stderr = proc.communicate(timeout=180)
     assert proc.returncode == 1, stderr
     reason = json.loads((out / "summary.json").read_text())["stop_reason"]
@@ -242,7 +229,7 @@ def test_the_supervisor_stopped_and_continued_goes_on_with_its_run(tmp_path):
     than the 3-s lease its modules used to hold it to, then ``fg``: the run goes on with a quiet run's records."""
     out = tmp_path / "run"
     sets = ["protocol.trials=60"]
-    proc = start_run(LEARN, out, *sets)
+    proc = start_sfl_run(LEARN, out, *sets)
     try:
         wait_for_trials(out, 10, proc)
         proc.send_signal(signal.SIGSTOP)
