@@ -447,7 +447,7 @@ class CPGController(Controller):
         if "start_slope_deg" in params:  # circuit start_slope: the start pose shifted by the slope it starts on
             network.set_start_slope(math.radians(float(params["start_slope_deg"])))
         if "ankle_adaptation" in params:  # each ankle's centre follows the sensed slope (issue 29)
-            network.set_ankle_adaptation(params["ankle_adaptation"] == "on")
+            network.set_ankle_adaptation(params["ankle_adaptation"] in ("on", True))
         if "start_ramp" in params:  # alpha_MLR grows from 0 over the trial's first seconds
             network.set_start_ramp(float(params["start_ramp"]))
         for name in ("gain_pitch", "gain_roll"):  # ch. 5's w1, w2 (L1631): multipliers of the groups' gains
@@ -603,6 +603,8 @@ def _check_trial_value(
             raise ValueError(f"phase_reset: {lacking}")
         return
     if name == "ankle_adaptation":
+        if isinstance(value, bool):  # YAML's bare on / off
+            value = "on" if value else "off"
         if not isinstance(value, str) or value not in ON_OFF:
             hint = nearest(value, ON_OFF) if isinstance(value, str) else None
             tail = f" (did you mean {hint!r}?)" if hint else ""
@@ -664,7 +666,7 @@ def _check_trial_value(
 
 def _check_terrain_switch(params: dict) -> None:
     """What a terrain switch needs besides each value's own check (``configure``; one value alone cannot say)."""
-    if params.get("ankle_adaptation") == "on" and "start_slope_deg" in params:
+    if params.get("ankle_adaptation") in ("on", True) and "start_slope_deg" in params:
         raise ValueError(
             "start_slope_deg: expected none with ankle_adaptation 'on' (the adaptation senses the slope the trial "
             "starts on); got both"
