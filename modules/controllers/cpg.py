@@ -543,36 +543,46 @@ class CPGController(Controller):
     BAND_STEP = 0.1  # s between two of the threshold's markers
 
     def _log_terrain_switch(self, trial_id: int, t0: float) -> None:
-        """A logged trial's terrain switch (§5.8) as series in degrees, to be drawn over the body's ``torso/pitch``:
-        ``terrain_switch/band_low`` and ``band_high`` (the threshold, given or measured, from when it is known to the
-        trial's end, a marker every ``BAND_STEP`` s; one of them for "below" or "above") and ``terrain_switch/at`` (a
-        marker at the switch, at the watched input's value then)."""
+        """A logged trial's terrain switch (§5.8) as series in degrees: the band its detector watches, from when it is
+        known to the trial's end (a marker every ``BAND_STEP`` s; one edge for "below" or "above"), drawn where its
+        signal is: over the body's ``torso/pitch`` for the torso detector (``terrain_switch/band_low``, ``band_high``),
+        over the sensed slope for the foot_slope detector (``terrain/band_low``, ``band_high``; the other detectors'
+        bands are in their events); and the switch, a marker at the torso pitch then (``terrain_switch/at``) and, for
+        foot_slope, at the sensed slope that left the band (``terrain/switch``)."""
         known = self.network.terrain_threshold
         if known is None:
             return
+        fired = [e for e in self.network.terrain_switch_events if e.copies[0]]
+        detector = self.network.terrain_detector
+        where = {"torso": "terrain_switch", "foot_slope": "terrain"}.get(detector)
         # dotted (a marker every BAND_STEP s), so that one trial's band is not joined to the next logged trial's
         span = t0 + np.arange(known.since, max(known.since, self.network.time) + 1e-9, self.BAND_STEP)
         for name, edge in (("band_low", known.low), ("band_high", known.high)):
-            if np.isfinite(edge[0]):
+            if where is not None and np.isfinite(edge[0]):
                 value = np.full(len(span), math.degrees(float(edge[0])))
                 self.telemetry.emit(
-                    series(
-                        f"terrain_switch/{name}", trial_id, span, value, "deg", color=self.SWITCH_COLOUR, points=True
-                    )
+                    series(f"{where}/{name}", trial_id, span, value, "deg", color=self.SWITCH_COLOUR, points=True)
                 )
-        fired = [e for e in self.network.terrain_switch_events if e.copies[0]]
-        if fired:
-            self.telemetry.emit(
-                series(
-                    "terrain_switch/at",
-                    trial_id,
-                    [t0 + fired[0].time],
-                    [math.degrees(float(np.ravel(fired[0].value)[0]))],
-                    "deg",
-                    color=self.SWITCH_COLOUR,
-                    points=True,
-                )
+        if not fired:
+            return
+        event = fired[0]
+        at = [t0 + event.time]
+        torso = event.value if event.detector == "torso" else event.torso
+        self.telemetry.emit(
+            series(
+                "terrain_switch/at",
+                trial_id,
+                at,
+                [math.degrees(float(np.ravel(torso)[0]))],
+                "deg",
+                color=self.SWITCH_COLOUR,
+                points=True,
             )
+        )
+        if event.detector == "foot_slope":
+            value = [math.degrees(float(np.ravel(event.value)[0]))]
+            colour = self.SWITCH_COLOUR
+            self.telemetry.emit(series("terrain/switch", trial_id, at, value, "deg", color=colour, points=True))
 
 
 def _check_trial_value(

@@ -593,6 +593,7 @@ class CPGNetwork:
             raise ValueError("switch_when 'outside': expected a band (switch_band) to leave; got a threshold")
         watch = Watch(make_detector(self, detector, input), when, after, band=band, threshold=threshold)
         self._terrain = TerrainSwitch(self, watch, input, mode, seconds, gains or {}, sigma_s, sigma_joints, theta_mlr)
+        self._terrain_detector = detector
         self.terrain_threshold = self._terrain.threshold()  # a given threshold: known from the start
 
     def watch_terrain(self, detectors, band: tuple[float, float], after: float, torso_input: str = "torso_pitch"):
@@ -601,6 +602,11 @@ class CPGNetwork:
         the same walk (issue 29). ``reset`` stops watching."""
         watches = [Watch(make_detector(self, name, torso_input), "outside", after, band=band) for name in detectors]
         self._watcher = Watcher(watches) if watches else None
+
+    @property
+    def terrain_detector(self) -> str | None:
+        """What the armed (or fired) terrain switch watches this trial (terrain.py ``DETECTORS``), or None."""
+        return self._terrain_detector
 
     @property
     def detector_events(self) -> list:
@@ -708,6 +714,7 @@ class CPGNetwork:
         self._posture_shift = np.zeros((b, 0 if posture is None else len(posture.joints)))  # rad, L1764
         self._terrain: TerrainSwitch | None = None  # an armed terrain switch (§5.8), until it has done its work
         self._watcher: Watcher | None = None  # detectors watched without switching (watch_terrain)
+        self._terrain_detector: str | None = None
         self._switch_jumps: list[tuple[float, float]] = []
         if self._ankles is not None:
             self._ankles.reset()

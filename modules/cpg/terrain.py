@@ -66,6 +66,7 @@ class TerrainSwitchEvent:
     new: dict[str, float]
     copies: np.ndarray
     detector: str = "torso"
+    torso: float | np.ndarray = float("nan")  # the watched torso input's value then (rad), whatever the detector
 
     @property
     def end_time(self) -> float:
@@ -345,7 +346,7 @@ class TerrainSwitch:
             due &= ~self.fired
             w.fired |= due
             if due.any():
-                self._start(due, time)
+                self._start(due, time, phi)
         moving = self.fired & ~self.done
         if not moving.any():
             return False
@@ -377,7 +378,7 @@ class TerrainSwitch:
         self.done[rows] = fraction >= 1.0
         return bool(self.done.all())
 
-    def _start(self, due: np.ndarray, time: float) -> None:
+    def _start(self, due: np.ndarray, time: float, phi: np.ndarray) -> None:
         """The copies ``due`` switch now: keep their current values (the old ones) and record the event."""
         net, w = self.network, self.watch
         self.fired |= due
@@ -416,6 +417,7 @@ class TerrainSwitch:
                 new=new,
                 copies=due.copy(),
                 detector=w.detector.name,
+                torso=per_copy(phi[due, net.circuit.inputs.index(self.input_name)]),
             )
         )
 
