@@ -834,6 +834,8 @@ class CPGNetwork:
             terrain = self._terrain
             if terrain.tick(phi, self.time, control_dt):
                 self._terrain = None  # every copy has switched and arrived: nothing more per tick
+            if self.terrain_threshold is None:  # measured on the walk: known from the window's last tick on
+                self.terrain_threshold = terrain.threshold()
             if terrain.jumps:
                 self._switch_jumps.extend(terrain.jumps)
                 terrain.jumps.clear()
