@@ -8,8 +8,9 @@ the ground under it and its ankle's centre follows (``circuit.AnkleAdaptation``,
 - the sole's pitch in the world is the torso's pitch (the inertial sensor) plus the leg's pitch joints (hip, knee,
   ankle pitch turn about the same axis); when the heel and the toe both press (the contact neurons GB and GF, L1345)
   the sole lies on the ground, so minus that pitch is the slope under it (+ = uphill);
-- each foot's estimate follows its flat-stance readings (first order, ``rate``); a foot in the air aims at the estimate
-  of the foot in flat stance, so that it lands on the slope the other stands on;
+- each foot's estimate follows its flat-stance readings (first order, ``rate``); a foot not lying flat (in the air, or
+  on its heel or toe) aims at the ground last sensed by a foot lying flat, so that it lands on the slope the other
+  stands on, and does not fall back to its own older estimate while it rolls onto the new ground;
 - each ankle's centre (its theta_0) moves toward ``per_slope`` x the aimed slope, at most ``speed`` rad/s.
 
 At a trial's first tick the estimate is the slope the start pose shows, and the centre takes it at once: a gait started
@@ -52,6 +53,8 @@ class AnkleCentres:
         self.centre = np.zeros((self.batch, len(self.joints)))
         #: (batch, feet): the slope each foot aimed at on the last tick, rad
         self.aim = np.zeros((self.batch, len(self.joints)))
+        #: (batch,): the slope last sensed by a foot in flat stance (the feet's mean when both are), rad
+        self.latest = np.zeros(self.batch)
 
     def ground(self, phi: np.ndarray) -> np.ndarray:
         """(batch, feet): minus each sole's pitch in the world, rad: the slope under it when it lies on the ground."""
@@ -67,15 +70,16 @@ class AnkleCentres:
         first = self.estimate is None
         if first:  # the start pose shows the slope it stands on
             self.estimate = reading.copy()
+            self.latest = reading.mean(axis=1)
         else:
             self.estimate += np.where(flat, (reading - self.estimate) * min(1.0, spec.rate * dt), 0.0)
+        standing = flat.sum(axis=1)
+        if standing.any():  # the ground last sensed: the feet in flat stance now
+            mean = (self.estimate * flat).sum(axis=1) / np.maximum(standing, 1)
+            self.latest = np.where(standing > 0, mean, self.latest)
         aim = self.estimate.copy()
-        if spec.share and len(self.joints) > 1:
-            airborne = (heel < spec.stance) & (toe < spec.stance)
-            standing = flat.sum(axis=1)
-            if (airborne & (standing > 0)[:, None]).any():
-                shared = (self.estimate * flat).sum(axis=1) / np.maximum(standing, 1)
-                aim = np.where(airborne & (standing > 0)[:, None], shared[:, None], aim)
+        if spec.share:  # a foot not lying flat aims at the ground last sensed (it lands where the other stands)
+            aim = np.where(flat, aim, self.latest[:, None])
         np.clip(aim, -spec.limit, spec.limit, out=aim)
         self.aim = aim
         want = np.where(aim > 0, spec.per_slope_up, spec.per_slope_down) * aim

@@ -283,8 +283,8 @@ class AnkleAdaptation(Strict):
         flat stance of foot f (heel and toe neurons >= stance):  g_f = -(pitch_input + sum(chain_f))   (the ground's
             slope under the sole, rad, + = uphill)
                                                             s_f += (g_f - s_f) min(1, rate dt)
-        a foot off the ground while the other is in flat stance aims at the other's estimate (it lands where that one
-        stands); the aimed slope is clipped to +-limit;
+        a foot not in flat stance aims at the ground last sensed in flat stance (by either foot: it lands where the
+        other stands); the aimed slope is clipped to +-limit;
         centre_f -> per_slope_up s (s > 0) or per_slope_down s (s < 0), at most ``speed`` rad/s;   theta_0,f += the
         change of centre_f.
 
@@ -300,7 +300,7 @@ class AnkleAdaptation(Strict):
     per_slope_down: Number  # rad of centre per rad of downhill slope
     speed: Positive  # rad/s
     limit: Positive  # rad: the steepest slope followed
-    share: bool = True  # a foot in the air aims at the slope under the foot on the ground
+    share: bool = True  # a foot not lying flat aims at the ground last sensed by a foot lying flat
     enabled: bool = False  # on unless a trial says (trial parameter ankle_adaptation)
 
 
