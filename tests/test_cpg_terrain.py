@@ -17,7 +17,7 @@ from sfl_brain.bodies.humanoid import Humanoid
 from sfl_brain.bodies.humanoid_table import STANDING
 from sfl_brain.body import InProcessLink
 from sfl_brain.messages import TrialRequest
-from sfl_brain.modules.controllers.cpg import CPGController, CPGParams
+from sfl_brain.modules.controllers.cpg import CPGController, CPGParams, terrain_switch_text
 from sfl_brain.modules.cpg import CPGNetwork, load_circuit, validate_circuit
 from sfl_brain.modules.cpg.circuit import read_circuit_data
 from sfl_brain.scenario import ScenarioError
@@ -145,6 +145,8 @@ def test_a_gradual_switch_keeps_every_command_continuous_and_lands_on_the_ramp_s
     switched = switching_walk("gradual")
     [event] = switched.network.terrain_switch_events
     assert event.detector == "time" and event.time == pytest.approx(1.0)
+    text = terrain_switch_text(event)
+    assert text.startswith("terrain switch (gradually over 0.667 s): at 1 s (switch_detector time);")
     jumps = np.array([j for _, j in switched.network.terrain_switch_jumps])
     assert len(jumps) == int(round(0.667 / DT)) + 1 and jumps.max() < 0.02
     at_once = switching_walk("at_once")
@@ -181,6 +183,7 @@ def test_the_foot_slope_detector_fires_within_its_latency_on_a_scripted_ramp_and
     scripted_ramp(c, reads, ramp_at=6.0, seconds=7.0)
     [event] = c.network.terrain_switch_events
     assert event.detector == "foot_slope" and 6.0 <= event.time <= 6.0 + 0.5  # issue 29: within 0.5 s
+    assert terrain_switch_text(event).startswith("terrain switch (at once): foot_slope ")
     assert event.threshold[1] - event.threshold[0] >= 2 * 0.035 - 1e-12  # never narrower than its floor
     watched = {e.detector: e for e in c.network.detector_events}
     assert watched["foot_slope"].time == event.time

@@ -712,11 +712,15 @@ def terrain_switch_text(event) -> str:
 
     how = "at once" if event.mode == "at_once" else f"gradually over {event.seconds:g} s"
     moves = ", ".join(f"{name} {number(event.old[name])} -> {number(new)}" for name, new in event.new.items())
+    detector = getattr(event, "detector", "torso")
+    if detector == "time":  # nothing sensed: the switch at its time
+        return f"terrain switch ({how}): at {event.time:g} s (switch_detector time); {moves}"
     if event.when == "outside":  # the band (low, high) it left
         band = f"[{number(event.threshold[0])}, {number(event.threshold[1])}]"
     else:
         band = number(event.threshold)
-    where = f"{event.input} {number(event.value)} rad {event.when} {band}"
+    signal = event.input if detector == "torso" else detector
+    where = f"{signal} {number(event.value)} rad {event.when} {band}"
     return f"terrain switch ({how}): {where}; {moves}"
 
 
