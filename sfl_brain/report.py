@@ -36,6 +36,7 @@ from .report_conditions import conditions_section, is_conditions_run  # noqa: E4
 from .report_cpg import cpg_run, is_cpg_run, write_cpg_sections  # noqa: E402
 from .report_study import StudySettings, study_section  # noqa: E402
 from .report_sweep import is_grid_sweep, sweep_section  # noqa: E402
+from .report_terrain import terrain_sections  # noqa: E402
 
 
 def _figure(run_dir: Path, out: Path, scenario: dict, rows: list[dict]) -> str:
@@ -250,6 +251,7 @@ def write_report(run_dirs: list[Path], out: Path, study: StudySettings | None = 
     vigilance_lines += [""] + ch5_sections(ch5_runs, out) if ch5_runs else []
     for scenario, completed_runs, skipped in conditions.values():
         vigilance_lines += [""] + conditions_section(scenario, completed_runs, skipped, out)
+        vigilance_lines += terrain_sections(scenario, completed_runs)
     names = sorted({r["scenario"] for r in cpg_results})
     stem = names[0] if len(cpg_results) == len(run_dirs) and len(names) == 1 else None
     if len(conditions) == 1 and sum(len(c[1]) + len(c[2]) for c in conditions.values()) == len(run_dirs):

@@ -171,7 +171,32 @@ class PatternSpaceAnalysis(Strict):
     where: dict[str, TrialValue] = Field({}, description="only logged trials with these grid values")
 
 
-Analysis = Annotated[PoincareAnalysis | TraceAnalysis | PatternSpaceAnalysis, Field(discriminator="kind")]
+class CommandJumpAnalysis(Strict):
+    """``sfl report``: how much a terrain switch itself changed the joint commands (issue 29): for every logged trial
+    of each condition, the largest change of any joint's command the switch made in one tick (the controller's
+    ``terrain_switch/command_jump`` series, rad), against ``limit``."""
+
+    kind: Literal["command_jump"]
+    limit: float = Field(0.02, gt=0, le=10, description="rad: the most a switch may change a command in one tick")
+    module: str = Field("controller", description="the scenario's module whose switch is read")
+
+
+class DetectionAnalysis(Strict):
+    """``sfl report``: the terrain detectors watched on every logged trial (issue 29; the controller's
+    ``events/detector``) against when a foot first touched the next piece of ground (the body's
+    ``events/terrain``): per condition and detector, walks it fired on, its latency, those within ``latency`` s and
+    before the torso pitch fell below ``pitch_below`` deg, and those that fired before the change."""
+
+    kind: Literal["detection"]
+    latency: float = Field(0.5, gt=0, le=60, description="s after the foot meets the new ground: fired in time")
+    pitch_below: float = Field(-5.0, ge=-90, le=90, description="deg: the torso pitch a detection must come before")
+    module: str = Field("controller", description="the scenario's module whose detectors are read")
+
+
+Analysis = Annotated[
+    PoincareAnalysis | TraceAnalysis | PatternSpaceAnalysis | CommandJumpAnalysis | DetectionAnalysis,
+    Field(discriminator="kind"),
+]
 
 
 class ConditionsProtocol(Strict):
@@ -524,7 +549,9 @@ def _clean_loc(loc: tuple, kind: str) -> tuple:
         if len(out) == 1 and out[0] == "protocol" and part in ("learn", "sweep", "exploit", "conditions"):
             continue
         if (
-            len(out) >= 2 and out[-2] == "analyses" and part in ("poincare", "trace", "pattern_space")
+            len(out) >= 2
+            and out[-2] == "analyses"
+            and part in ("poincare", "trace", "pattern_space", "command_jump", "detection")
         ):  # an analysis's kind tag
             continue
         if out == ["protocol", "proposer"] and part in PROPOSERS:  # a proposer's kind tag
@@ -566,11 +593,14 @@ def problems_from(exc: ValidationError, model: type[BaseModel], prefix: tuple = 
         elif kind == "union_tag_invalid":
             ctx = err.get("ctx", {})
             tags = [t.strip().strip("'") for t in str(ctx.get("expected_tags", "")).split(",")]
+            discriminator = str(ctx.get("discriminator", "kind")).strip("'")
+            # the tag as written (pydantic's context has it as a string: an empty value would read 'None')
+            tag = given.get(discriminator) if isinstance(given, dict) else ctx.get("tag")
             out.append(
                 Problem(
                     path + ".kind" if path else "kind",
-                    f"expected one of {ctx.get('expected_tags')}; got {_short(ctx.get('tag'))}",
-                    nearest(str(ctx.get("tag")), tags),
+                    f"expected one of {ctx.get('expected_tags')}; got {_short(tag)}",
+                    nearest(str(tag), tags) if tag is not None else None,
                 )
             )
         elif kind in EXPECTED:
@@ -625,6 +655,11 @@ class Plan:
     @property
     def dim(self) -> int:
         return len(self.scenario.space)
+
+    @property
+    def body_class(self) -> type:
+        """The class of the run's body (every body worker runs the same ``modules.body``)."""
+        return next(i.cls for i in self.instances if i.name in self.bodies)
 
     @property
     def lockstep_processes(self) -> list[str]:

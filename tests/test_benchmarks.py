@@ -95,3 +95,10 @@ def test_placement_benchmark_prints_both_placements_and_their_ratio():
     figures(out, r"   yields +([\d.]+)   yields/before")
     figures(out, r"yields/before = ([\d.]+)")
     assert "  pinned   before  body and controller share core" in out  # the placement before issue 34: pinned there
+
+
+def test_gym_benchmark_prints_the_door_against_the_bodys_own_tick():
+    out = bench("gym.py", "--rounds", "2", "--block", "20", "--vector", "0")
+    # per body: the body alone, the door unwrapped, through gymnasium.make, normalised; their ratios to the first
+    figures(out, r"median +([\d.]+) us", count=8)
+    figures(out, r"/ \(a\) +([\d.]+)", count=8)
