@@ -57,9 +57,10 @@ import hashlib
 import math
 import os
 import tempfile
+from typing import Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from sfl_brain.bodies.humanoid_table import (
     FSR_X,
@@ -265,6 +266,19 @@ class HumanoidParams(BodyParams):
     run_up: float = Field(1.0, gt=0, le=100, description="m of ground behind the start, along the first piece")
     run_out: float = Field(20.0, gt=0, le=1000, description="m of ground after the last piece")
     ground_width: float = Field(2.0, gt=0, le=1000, description="m: the ground's width (the lane is +-0.5 m)")
+    physics: Literal["pybullet", "mujoco"] = Field("pybullet", description="physics engine (mujoco: an extra, 31)")
+
+    @field_validator("physics")
+    @classmethod
+    def _engine_installed(cls, physics: str) -> str:  # MuJoCo is optional: refused at `sfl check` without it
+        if physics == "mujoco":
+            from sfl_brain.bodies.humanoid_mujoco import import_mujoco
+
+            try:
+                import_mujoco()
+            except ImportError as exc:
+                raise ValueError(str(exc)) from None
+        return physics
 
 
 class Humanoid(Body):
@@ -275,6 +289,13 @@ class Humanoid(Body):
     COMMANDS = COMMANDS
     TRIAL_PARAMS = ("slope_deg", "terrain", *PUSH_RANGES, *START_RANGES)
     LAYOUT = "humanoid"  # the recording's default layout: the walk in 3-D, the torso pitch with the terrain switch
+
+    def __new__(cls, params: HumanoidParams | None = None, *, seed: int = 0):
+        if params is not None and params.physics == "mujoco":  # the same body on MuJoCo (humanoid_mujoco.py)
+            from sfl_brain.bodies.humanoid_mujoco import HumanoidMujoco
+
+            return HumanoidMujoco.__new__(HumanoidMujoco, params, seed=seed)
+        return super().__new__(cls)
 
     def __init__(self, params: HumanoidParams | None = None, *, seed: int = 0) -> None:
         super().__init__(params, seed=seed)

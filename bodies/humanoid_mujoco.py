@@ -1,0 +1,476 @@
+"""The NAO-sized humanoid on MuJoCo (issue 31): the body of ``humanoid.py`` with another physics engine.
+
+The same robot (``humanoid_mjcf.py`` generates it from ``humanoid_table.py``, as the URDF is), the same sensors and
+commands (``SENSORS``, ``COMMANDS``: the CPG circuit drives it unchanged), the same servo law, trial, conditions,
+judging, energy (5.5)-(5.6), outcome and telemetry: :class:`HumanoidMujoco` is a :class:`Humanoid` whose
+engine-specific methods (building the world, placing the robot, reading joints, torso and contacts, stepping) go to a
+:class:`MujocoWorld`; ``sense``, ``_judge``, ``outcome``, ``log_trial`` and the trial parameters are the PyBullet
+body's own.
+
+Chosen in a scenario by ``modules.body.params.physics: mujoco`` on the ``humanoid`` body or by the body
+``humanoid_mujoco`` (the same class, ``physics`` mujoco by default). MuJoCo is an optional extra
+(``pip install -e '.[mujoco]'``); it is imported when a MuJoCo body is made, never by the core, and without it
+``physics: mujoco`` is refused by ``sfl check`` with the command that installs it.
+
+**Servo** (``Humanoid.actuate``'s law, every physics step, in Python): speed target ``servo_rate * (q_cmd - q)``
+clipped to the joint's speed, torque cap ``servo_stiffness * |q_cmd - q| + HOLD_TORQUE`` within the joint's effort.
+PyBullet reaches the speed target with a velocity-motor constraint limited by the cap; here each joint's velocity
+actuator gives ``SERVO_KV * (target - dq)`` limited by the same cap (its force range, set every step), integrated
+implicitly. The torque the sensors and the energy read is the one applied over the step: the cap when it binds,
+otherwise ``SERVO_KV * (target - dq)`` at the step's end velocity (the implicit integrator's force).
+
+**Speed and determinism.** One model per terrain (and ball or not), compiled once; every trial resets the data to the
+saved start (``mj_resetData``, then the start's positions): MuJoCo keeps no contact cache across steps, so the same
+request gives the same trial bit for bit whatever ran before (tests/test_humanoid_mujoco.py).
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+from typing import Literal
+
+import numpy as np
+from pydantic import Field
+
+from sfl_brain.bodies.humanoid import (
+    BALL_GAP,
+    BALL_RADIUS,
+    BALL_WATCH,
+    CLEARANCE,
+    EFFORT,
+    FEET,
+    GROUND_THICKNESS,
+    HOLD_TORQUE,
+    JOINT_NAMES,
+    LOWER,
+    MAX_BACK,
+    MOTOR,
+    PUSH_RANGES,
+    SPEED,
+    START_RANGES,
+    UPPER,
+    G,
+    Humanoid,
+    HumanoidParams,
+    N,
+)
+from sfl_brain.bodies.humanoid_mjcf import world_mjcf
+from sfl_brain.bodies.humanoid_table import FSR_X, FSR_Y, LINKS, PARTS, SOLE, STANDING
+from sfl_brain.messages import TrialRequest
+from sfl_brain.telemetry import rates_of
+
+EXTRA = "pip install -e '.[mujoco]'"  # what installs MuJoCo with sfl-brain (pyproject's optional extra)
+
+
+def import_mujoco():
+    """The ``mujoco`` module, or an ImportError that names the extra which installs it."""
+    try:
+        return importlib.import_module("mujoco")
+    except ImportError as exc:
+        raise ImportError(
+            f"physics: mujoco needs MuJoCo, an optional extra of sfl-brain: {EXTRA} (or pip install mujoco); {exc}"
+        ) from None
+
+
+def _turn_y(angle: float) -> tuple[float, float, float, float]:
+    """The quaternion (x, y, z, w) of a turn by ``angle`` rad about +y."""
+    return (0.0, math.sin(angle / 2), 0.0, math.cos(angle / 2))
+
+
+def _wxyz_to_xyzw(q) -> tuple[float, float, float, float]:
+    return (float(q[1]), float(q[2]), float(q[3]), float(q[0]))
+
+
+class MujocoWorld:
+    """The engine-specific part: a MuJoCo model of one terrain (and ball or not), its data, the servo step and the
+    reads the body's sensors are made of. Nothing here judges a trial."""
+
+    def __init__(self, ground_boxes, params: HumanoidParams, ball: bool) -> None:
+        mj = self.mj = import_mujoco()
+        h = params.control_dt / params.substeps
+        xml = world_mjcf(
+            ground_boxes,
+            h,
+            friction=params.friction,
+            ball_radius=BALL_RADIUS if ball else None,
+            ball_at=(-1e3, 0.0, -1e3),  # parked until the first trial places it
+        )
+        self.model = model = mj.MjModel.from_xml_string(xml)
+        self.data = mj.MjData(model)
+        body = {model.body(i).name: i for i in range(model.nbody)}
+        self.torso_body = body["torso"]
+        self.link_body = [body[link] for link in LINKS]  # the pictures' order
+        self.feet = [body[foot] for foot in FEET]
+        self.qpos = np.array([model.jnt_qposadr[model.joint(name).id] for name in JOINT_NAMES])
+        self.qvel = np.array([model.jnt_dofadr[model.joint(name).id] for name in JOINT_NAMES])
+        self.rotor_qvel = np.array([model.jnt_dofadr[model.joint(f"rotor_{name}").id] for name in JOINT_NAMES])
+        self.clutches = np.array([model.tendon(name).id for name in JOINT_NAMES])
+        assert (self.clutches == np.arange(N)).all()  # the clutches are in JOINTS order (the joints in the tree's)
+        self.friction_tendon = int(mj.mjtConstraint.mjCNSTR_FRICTION_TENDON)
+        self.ground_geoms = {model.geom(f"ground_{k}").id for k in range(len(ground_boxes))}
+        self.robot_geoms = {g for g in range(model.ngeom) if model.geom_bodyid[g] in set(self.link_body)}
+        self.ball = body.get("ball")
+        self.ball_geom = model.geom("ball").id if ball else None
+        self.ball_qpos = model.jnt_qposadr[model.joint("ball").id] if ball else None
+        self.ball_qvel = model.jnt_dofadr[model.joint("ball").id] if ball else None
+        self.rate, self.stiffness = params.servo_rate, params.servo_stiffness
+        self.cap = model.tendon_frictionloss  # (N,), a view: the clutches' torque cap, set every step
+        self._force = np.zeros(6)
+        self.start: np.ndarray | None = None  # qpos of the start, saved by the body
+
+    # ------------------------------------------------------------------ state
+    def reset(self, qpos: np.ndarray) -> None:
+        """Everything back to rest at positions ``qpos`` (time 0, no velocity, no contact, no applied force)."""
+        mj, d = self.mj, self.data
+        mj.mj_resetData(self.model, d)
+        d.qpos[:] = qpos
+        mj.mj_forward(self.model, d)
+
+    def set_joints(self, angles) -> None:
+        self.data.qpos[self.qpos] = angles
+        self.mj.mj_kinematics(self.model, self.data)
+
+    def set_torso(self, position, quaternion_xyzw) -> None:
+        """Put the torso's own frame at this pose (its free joint's position is that frame's origin)."""
+        qx, qy, qz, qw = quaternion_xyzw
+        self.data.qpos[0:3] = position
+        self.data.qpos[3:7] = (qw, qx, qy, qz)
+        self.mj.mj_kinematics(self.model, self.data)
+
+    def torso_com(self) -> np.ndarray:
+        return self.data.xipos[self.torso_body].copy()
+
+    def joints(self) -> tuple[np.ndarray, np.ndarray]:
+        d = self.data
+        return d.qpos[self.qpos], d.qvel[self.qvel]
+
+    def torso(self) -> tuple[tuple, np.ndarray, np.ndarray]:
+        """The torso's centre of mass (m), its frame's rotation matrix (columns: its axes in the world) and its spin
+        in that frame (rad/s; a free joint's angular velocity is in the body's frame)."""
+        d = self.data
+        return (
+            tuple(d.xipos[self.torso_body].tolist()),
+            d.xmat[self.torso_body].reshape(3, 3).copy(),
+            d.qvel[3:6].copy(),
+        )
+
+    # ------------------------------------------------------------------ acting
+    def step(self, target: np.ndarray, push=None) -> np.ndarray:
+        """One physics step of the servo law toward ``target`` (rad; see the module's docstring), with a ``push``
+        (N, world frame, at the torso's centre of mass) if given; returns the motor torques applied (N m)."""
+        d = self.data
+        error = target - d.qpos[self.qpos]
+        d.qvel[self.rotor_qvel] = np.clip(self.rate * error, -SPEED, SPEED)  # the speed target
+        self.cap[:] = np.minimum(self.stiffness * np.abs(error) + HOLD_TORQUE, EFFORT)
+        if push is not None:
+            d.xfrc_applied[self.torso_body, :3] = push
+        self.mj.mj_step(self.model, d)
+        if push is not None:
+            d.xfrc_applied[self.torso_body, :3] = 0.0
+        # each clutch's friction force, the torque it put on its joint over the step (the tendon pulls q with +1)
+        tau = np.zeros(N)
+        rows = d.efc_type == self.friction_tendon
+        tau[d.efc_id[rows]] = d.efc_force[rows]
+        return tau
+
+    # ------------------------------------------------------------------ contacts
+    def _contacts(self, geoms: set[int], others: set[int]):
+        """(position, force on ``geoms``' side in the world frame, its body, normal force N) of every active contact
+        between ``geoms`` and ``others``."""
+        mj, m, d = self.mj, self.model, self.data
+        out = []
+        force6 = self._force
+        for i in range(d.ncon):
+            contact = d.contact[i]
+            g1, g2 = int(contact.geom1), int(contact.geom2)
+            if g2 in geoms and g1 in others:
+                sign, mine = 1.0, g2  # the contact force pushes geom2 along the normal (geom1 -> geom2)
+            elif g1 in geoms and g2 in others:
+                sign, mine = -1.0, g1
+            else:
+                continue
+            mj.mj_contactForce(m, d, i, force6)
+            frame = contact.frame.reshape(3, 3)  # rows: the normal, two tangents
+            out.append((contact.pos.copy(), sign * (force6[:3] @ frame), int(m.geom_bodyid[mine]), float(force6[0])))
+        return out
+
+    def foot_contacts(self) -> list[list[tuple[np.ndarray, np.ndarray, float]]]:
+        """Per foot, (position, force on the foot, normal force N) of its sole's contacts with the ground."""
+        feet = self.feet
+        per_foot = [[], []]
+        for position, force, body, normal in self._contacts(self.robot_geoms, self.ground_geoms):
+            if body in feet:
+                per_foot[feet.index(body)].append((position, force, normal))
+        return per_foot
+
+    def foot_frames(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        d = self.data
+        return [(d.xpos[b].copy(), d.xmat[b].reshape(3, 3).copy()) for b in self.feet]
+
+    def ball_contacts(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """(position, force on the robot) of the ball's contacts with the robot."""
+        return [(pos, force) for pos, force, _, _ in self._contacts(self.robot_geoms, {self.ball_geom})]
+
+    def link_poses(self) -> list[tuple[tuple, tuple]]:
+        """Every simulated link's frame (position, quaternion x y z w), in LINKS order."""
+        d = self.data
+        return [(tuple(d.xpos[b].tolist()), _wxyz_to_xyzw(d.xquat[b])) for b in self.link_body]
+
+    def throw(self, position, velocity, mass: float) -> None:
+        m, d = self.model, self.data
+        m.body_mass[self.ball] = mass
+        m.body_inertia[self.ball] = 0.4 * mass * BALL_RADIUS**2
+        a, v = self.ball_qpos, self.ball_qvel
+        d.qpos[a : a + 3] = position
+        d.qpos[a + 3 : a + 7] = (1.0, 0.0, 0.0, 0.0)
+        d.qvel[v : v + 3] = velocity
+        d.qvel[v + 3 : v + 6] = 0.0
+
+
+class HumanoidMujocoParams(HumanoidParams):
+    physics: Literal["mujoco"] = Field("mujoco", description="physics engine: this body's is MuJoCo")
+
+
+class HumanoidMujoco(Humanoid):
+    """NAO V4.0-sized humanoid on MuJoCo (boxes): the PyBullet body's sensors, commands, servo law and trials."""
+
+    Params = HumanoidMujocoParams
+
+    def __new__(cls, params: HumanoidParams | None = None, *, seed: int = 0):
+        return object.__new__(cls)  # never dispatched back to PyBullet by Humanoid.__new__
+
+    def __init__(self, params: HumanoidParams | None = None, *, seed: int = 0) -> None:
+        import_mujoco()  # a missing extra fails here, with its name, not in the first trial
+        super().__init__(params, seed=seed)
+        self._worlds: dict = {}  # (terrain, ball or not) -> MujocoWorld, built once each
+        self.world: MujocoWorld | None = None
+
+    # ------------------------------------------------------------------ world
+    def start_trial(self, request: TrialRequest) -> None:
+        p = self.params
+        body_params = request.body_params
+        for name in (*PUSH_RANGES, *START_RANGES):
+            if name in body_params:
+                self.check_trial_param(name, body_params[name])
+        self.push_force = float(body_params.get("push_force", 0.0))
+        self.push_start = float(body_params.get("push_time", 0.0))
+        self.push_end = self.push_start + float(body_params.get("push_duration", 0.0))
+        direction = math.radians(float(body_params.get("push_direction_deg", 0.0)))
+        self.push_vector = self.push_force * np.array([math.cos(direction), math.sin(direction), 0.0])
+        self.ball_mass = float(body_params.get("ball_mass", 0.0))
+        self.ball_speed = float(body_params.get("ball_speed", 0.0))
+        self.ball_time = float(body_params.get("ball_time", 0.0))
+        self.ball_height = float(body_params.get("ball_height", 0.0))
+        self.ball_impulse = self.ball_peak = 0.0
+        self._ball_thrown = False
+        pieces = self._pieces(body_params)
+        key = (pieces, self.ball_mass > 0)
+        if key not in self._worlds:
+            self._worlds[key] = self._build(pieces, ball=self.ball_mass > 0)
+        world = self.world = self._worlds[key]
+        self.ground_x, self.ground_z, self.ground_boxes, self._start_pose, self.start_height = world.ground
+        world.reset(world.start)
+        start_noise = float(body_params.get("start_noise", p.start_noise))  # a trial may set its own
+        if start_noise > 0:
+            offsets = np.random.default_rng(request.seed).normal(0.0, start_noise, N)
+            world.set_joints(np.clip(self._start_pose + offsets, LOWER, UPPER))
+            world.mj.mj_forward(world.model, world.data)
+        self.ticks, self.t = 0, 0.0
+        self.back = 0.0  # N: the touch sensor `back` (see actuate)
+        self.energy = 0.0  # E_e (5.6), J
+        self.fell = self.left_lane = self.finished = False
+        self.finish_time = math.nan
+        self._read_joints()
+        self.tau = np.zeros(N)
+        self._joint_lists = (self._joint_lists[0], self._joint_lists[1], [0.0] * N)
+        self._read_torso()
+        rates = rates_of(self.telemetry)
+        self._signal_every = rates.signal_every(p.control_dt)
+        self._picture_every = rates.picture_every(p.control_dt)
+        self._trace = [] if self.logging else None  # (t, sensor values, motor power W, (x, y, heading))
+        self._frames = [] if self.logging else None  # (t, link poses, feet's centre of pressure and force)
+        self._pushes = [] if self.logging else None  # (t, torso centre of mass, force) every physics step of a push
+
+    def _build(self, pieces: tuple[tuple[float, float], ...], ball: bool = False) -> MujocoWorld:
+        """A world for ``pieces`` (and a ball): the model compiled, the robot placed standing at x = 0, that start
+        saved."""
+        ground_x, ground_z, ground_boxes = self._ground(pieces)
+        self.ground_x, self.ground_z = ground_x, ground_z
+        world = MujocoWorld(ground_boxes, self.params, ball)
+        self.world = world
+        pose, start_height = self._place(pieces[0][1])
+        if ball:  # parked on the run-up, far behind the robot (the PyBullet body's place)
+            x = -self.params.run_up + 2 * BALL_RADIUS
+            world.throw((x, 0.0, self.ground_height(x) + BALL_RADIUS), (0.0, 0.0, 0.0), 1.0)
+        world.start = world.data.qpos.copy()
+        world.ground = (ground_x, ground_z, ground_boxes, pose, start_height)
+        return world
+
+    def _ground(self, pieces):
+        """The profile's points and its boxes (centre, half sizes, quaternion x y z w): the PyBullet body's ground
+        (``Humanoid._build_ground``), the first piece extended back by the run-up, the last forward by the run-out."""
+        p = self.params
+        lengths = [length for length, _ in pieces]
+        lengths[0] += p.run_up
+        lengths[-1] += p.run_out
+        first = pieces[0][1]
+        points = [(-p.run_up * math.cos(first), -p.run_up * math.sin(first))]
+        for length, (_, slope) in zip(lengths, pieces, strict=True):
+            x, z = points[-1]
+            points.append((x + length * math.cos(slope), z + length * math.sin(slope)))
+        boxes = []
+        for (x0, z0), (x1, z1) in zip(points[:-1], points[1:], strict=True):
+            length, slope = math.hypot(x1 - x0, z1 - z0), math.atan2(z1 - z0, x1 - x0)
+            half = (length / 2, p.ground_width / 2, GROUND_THICKNESS / 2)
+            centre = ((x0 + x1) / 2 + math.sin(slope) * half[2], 0.0, (z0 + z1) / 2 - math.cos(slope) * half[2])
+            boxes.append((centre, half, _turn_y(-slope)))
+        ground_x, ground_z = np.array(points).T
+        return ground_x, ground_z, boxes
+
+    def _place(self, slope: float) -> tuple[np.ndarray, float]:
+        """Stand the robot at x = 0 as ``Humanoid._place`` does (the standing pose, the ankles pitched by ``slope``,
+        the torso as upright as the pose makes it, its centre of mass at x = 0, the soles CLEARANCE above the
+        ground); returns the pose and the start height of the torso's centre of mass above the ground."""
+        world = self.world
+        pose = np.array([STANDING[name] for name in JOINT_NAMES])
+        pose[[JOINT_NAMES.index("ankle_pitch_l"), JOINT_NAMES.index("ankle_pitch_r")]] -= slope
+        lean = -(STANDING["hip_pitch_l"] + STANDING["knee_l"] + STANDING["ankle_pitch_l"])
+        world.set_joints(pose)
+        turn = _turn_y(lean)
+        world.set_torso((0.0, 0.0, 1.0), turn)
+        com = world.torso_com()
+        lowest = math.inf
+        for foot, (position, rotation) in zip(FEET, world.foot_frames(), strict=True):
+            sole = next(part for part in PARTS if part.link == foot and part.collides)
+            corners = np.array(
+                [
+                    (sole.com[0] + dx * sole.size[0] / 2, sole.com[1] + dy * sole.size[1] / 2, -SOLE)
+                    for dx in (-1, 1)
+                    for dy in (-1, 1)
+                ]
+            )
+            world_corners = position + corners @ rotation.T
+            gaps = world_corners[:, 2] - np.interp(world_corners[:, 0] - com[0], self.ground_x, self.ground_z)
+            lowest = min(lowest, float(gaps.min()))
+        frame = world.data.qpos[0:3].copy()
+        world.set_torso((frame[0] - com[0], frame[1], frame[2] - lowest + CLEARANCE), turn)
+        com = world.torso_com()
+        return pose, float(com[2] - self.ground_height(com[0]))
+
+    # ------------------------------------------------------------------ sensing
+    def _read_joints(self) -> None:
+        q, dq = self.world.joints()
+        self.q, self.dq = q, dq
+        self._joint_lists = (q.tolist(), dq.tolist(), self.tau.tolist() if hasattr(self, "tau") else [0.0] * N)
+
+    def _read_torso(self) -> None:
+        self.torso_position, self.torso_turn, self.torso_spin = self.world.torso()
+
+    def _foot_pressure(self) -> list[float]:
+        """The 8 FSR forces (N, FSR_NAMES order), shared out as ``Humanoid._foot_pressure`` does: each sole
+        contact's normal force split bilinearly between the toe and heel rows and the inner and outer columns."""
+        toe_x, heel_x = FSR_X
+        inner_y, outer_y = FSR_Y
+        length, width = toe_x - heel_x, outer_y - inner_y
+        fsr = [0.0] * 8
+        world = self.world
+        if world.data.ncon == 0:
+            return fsr
+        frames = world.foot_frames()
+        for k, contacts in enumerate(world.foot_contacts()):
+            if not contacts:
+                continue
+            origin, rotation = frames[k]
+            side = 1.0 if k == 0 else -1.0  # the right foot is the left's mirror image in y
+            toe_outer = toe_inner = heel_inner = heel_outer = 0.0
+            for position, _, normal in contacts:
+                x, y, _ = ((position - origin) @ rotation).tolist()  # into the foot's frame
+                y *= side
+                toe = min(max((x - heel_x) / length, 0.0), 1.0)
+                outer = min(max((y - inner_y) / width, 0.0), 1.0)
+                toe_inner += normal * toe * (1 - outer)
+                toe_outer += normal * toe * outer
+                heel_inner += normal * (1 - toe) * (1 - outer)
+                heel_outer += normal * (1 - toe) * outer
+            fsr[4 * k : 4 * k + 4] = toe_inner, toe_outer, heel_inner, heel_outer
+        return fsr
+
+    # ------------------------------------------------------------------ acting
+    def actuate(self, command: np.ndarray) -> None:
+        p, world = self.params, self.world
+        target = np.minimum(np.maximum(command, LOWER), UPPER)
+        h = p.control_dt / p.substeps
+        back = 0.0  # N s pressing the robot forward this tick (a push, the ball): the touch sensor `back`
+        energy = self.energy
+        for k in range(p.substeps):
+            t = self.t + k * h
+            push = None
+            if self.push_force > 0 and self.push_start <= t < self.push_end:
+                push = self.push_vector  # an external force lasts one step: applied every step of the push
+                back += max(float(push[0]), 0.0) * h
+                if self._pushes is not None:
+                    self._pushes.append((t, world.torso_com(), push))
+            if self.ball_mass > 0 and t >= self.ball_time - 1e-9 and not self._ball_thrown:
+                self._throw()
+            tau = world.step(target, push)
+            if self._ball_thrown and t < self.ball_time + BALL_WATCH:
+                back += self._ball_contacts(t + h, h)
+            energy += float(MOTOR @ tau**2) * h  # (5.5)-(5.6)
+        self.tau = tau
+        self.q, self.dq = world.joints()
+        self._joint_lists = (self.q.tolist(), self.dq.tolist(), tau.tolist())
+        self.energy = energy
+        self.back = min(back / p.control_dt, MAX_BACK)
+        self.ticks += 1
+        self.t = self.ticks * p.control_dt
+        self._read_torso()
+        self._judge()
+        if self._trace is not None:
+            tick = self.ticks - 1
+            if tick % self._signal_every == 0:
+                forward = self.torso_turn[:, 0]  # the torso's x axis in the world: its heading on the ground
+                where = (*self.torso_position[:2], math.atan2(forward[1], forward[0]))
+                self._trace.append((self.t, self.sense(), float(MOTOR @ self.tau**2), where))
+            if tick % self._picture_every == 0:
+                self._record_frame()
+
+    def _throw(self) -> None:
+        """The ball leaves BALL_GAP m behind the torso's centre of mass at ``ball_speed``, aimed to arrive at
+        ``ball_height`` above it (``Humanoid._throw``)."""
+        com = self.world.torso_com()
+        flight = BALL_GAP / self.ball_speed if self.ball_speed > 0 else 0.0
+        start = (com[0] - BALL_GAP, com[1], com[2] + self.ball_height)
+        self.world.throw(start, (self.ball_speed, 0.0, G * flight / 2), self.ball_mass)
+        self._ball_thrown = True
+
+    def _ball_contacts(self, t: float, h: float) -> float:
+        """The ball's contact forces on the robot over this physics step (``Humanoid._ball_contacts``)."""
+        contacts = self.world.ball_contacts()
+        if not contacts:
+            return 0.0
+        force = sum(f for _, f in contacts)
+        self.ball_impulse += float(force[0]) * h
+        self.ball_peak = max(self.ball_peak, float(force[0]))
+        if self._pushes is not None:
+            self._pushes.append((t, contacts[0][0], force))
+        return max(float(force[0]), 0.0) * h
+
+    # ------------------------------------------------------------------ telemetry
+    def _record_frame(self) -> None:
+        """Where every link is and the feet's contact forces (``Humanoid._record_frame``)."""
+        world = self.world
+        forces = []
+        for contacts in world.foot_contacts():
+            total = sum(normal for _, _, normal in contacts)
+            if total <= 0:
+                forces.append(np.zeros(6))
+                continue
+            centre = sum(position * normal for position, _, normal in contacts) / total  # centre of pressure
+            force = sum(f for _, f, _ in contacts)
+            forces.append(np.concatenate([centre, force]))
+        self._frames.append((self.t, world.link_poses(), np.array(forces)))
+
+    def close(self) -> None:
+        """Drop this body's MuJoCo models."""
+        self._worlds, self.world = {}, None
