@@ -97,8 +97,22 @@ def _body(link: str, friction: float, depth: int) -> list[str]:
     return out
 
 
-def robot_mjcf(friction: float = 0.8, servo_kv: float = 5.0) -> tuple[str, str]:
-    """The robot's ``<body>`` tree (torso on a free joint) and its ``<actuator>`` block, from the table."""
+def _tree_order(link: str = "torso") -> list[str]:
+    """The driven joints depth first, as MuJoCo numbers them (a joint, then its child's joints)."""
+    out = []
+    for j in JOINTS:
+        if j.parent == link:
+            out += [j.name, *_tree_order(j.child)]
+    return out
+
+
+#: the driven joints in MuJoCo's order (qpos 7.., qvel 6..); the rotors and clutches follow it too
+TREE_ORDER: tuple[str, ...] = tuple(_tree_order())
+
+
+def robot_mjcf(friction: float = 0.8) -> tuple[str, str]:
+    """The robot's ``<body>`` tree (torso on a free joint) and its servos' rotors (bodies) and clutches (a
+    ``<tendon>`` block), from the table."""
     assert LINKS[0] == "torso"
     body = ['<body name="torso">', '  <freejoint name="torso"/>', f"  {_inertial('torso')}"]
     body += [f"  {g}" for g in _geoms("torso", friction)]
@@ -107,7 +121,8 @@ def robot_mjcf(friction: float = 0.8, servo_kv: float = 5.0) -> tuple[str, str]:
     # the servos: a rotor per joint (its own body in the world, turned at the speed target) and a slip clutch between
     # it and the joint (a tendon q - r whose friction, the torque cap, is set every step)
     rotors, clutches = [], []
-    for k, j in enumerate(JOINTS):
+    by_name = {j.name: j for j in JOINTS}
+    for k, j in enumerate(by_name[name] for name in TREE_ORDER):
         rotors += [
             f'<body name="rotor_{j.name}" pos="0 {k!r} {ROTOR_Z!r}">',
             f'  <joint name="rotor_{j.name}" type="hinge" axis="0 1 0" armature="{ROTOR_ARMATURE!r}"/>',
@@ -125,13 +140,12 @@ def world_mjcf(
     ground_boxes,
     timestep: float,
     friction: float = 0.8,
-    servo_kv: float = 5.0,
     ball_radius: float | None = None,
     ball_at=(0.0, 0.0, 0.0),
 ) -> str:
     """A whole world: the ground (``(centre, half sizes, quaternion x y z w)`` boxes), the robot, a ball if
     ``ball_radius``; MuJoCo's options as the module's docstring says."""
-    robot, actuators = robot_mjcf(friction, servo_kv)
+    robot, clutches = robot_mjcf(friction)
     ground = []
     for k, (centre, half, (qx, qy, qz, qw)) in enumerate(ground_boxes):
         ground.append(
@@ -163,7 +177,7 @@ def world_mjcf(
             *(f"    {line}" for line in ball),
             "  </worldbody>",
             "  <tendon>",
-            *(f"    {line}" for line in actuators.splitlines()),
+            *(f"    {line}" for line in clutches.splitlines()),
             "  </tendon>",
             "</mujoco>",
             "",

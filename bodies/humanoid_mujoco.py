@@ -55,7 +55,7 @@ from sfl_brain.bodies.humanoid import (
     HumanoidParams,
     N,
 )
-from sfl_brain.bodies.humanoid_mjcf import world_mjcf
+from sfl_brain.bodies.humanoid_mjcf import TREE_ORDER, world_mjcf
 from sfl_brain.bodies.humanoid_table import FSR_X, FSR_Y, LINKS, PARTS, SOLE, STANDING
 from sfl_brain.messages import TrialRequest
 from sfl_brain.telemetry import rates_of
@@ -82,6 +82,9 @@ def _wxyz_to_xyzw(q) -> tuple[float, float, float, float]:
     return (float(q[1]), float(q[2]), float(q[3]), float(q[0]))
 
 
+GROUND, ROBOT, BALL = 1, 2, 3  # geom kinds
+
+
 class MujocoWorld:
     """The engine-specific part: a MuJoCo model of one terrain (and ball or not), its data, the servo step and the
     reads the body's sensors are made of. Nothing here judges a trial."""
@@ -102,21 +105,35 @@ class MujocoWorld:
         self.torso_body = body["torso"]
         self.link_body = [body[link] for link in LINKS]  # the pictures' order
         self.feet = [body[foot] for foot in FEET]
-        self.qpos = np.array([model.jnt_qposadr[model.joint(name).id] for name in JOINT_NAMES])
-        self.qvel = np.array([model.jnt_dofadr[model.joint(name).id] for name in JOINT_NAMES])
-        self.rotor_qvel = np.array([model.jnt_dofadr[model.joint(f"rotor_{name}").id] for name in JOINT_NAMES])
-        self.clutches = np.array([model.tendon(name).id for name in JOINT_NAMES])
-        assert (self.clutches == np.arange(N)).all()  # the clutches are in JOINTS order (the joints in the tree's)
-        self.friction_tendon = int(mj.mjtConstraint.mjCNSTR_FRICTION_TENDON)
-        self.ground_geoms = {model.geom(f"ground_{k}").id for k in range(len(ground_boxes))}
-        self.robot_geoms = {g for g in range(model.ngeom) if model.geom_bodyid[g] in set(self.link_body)}
-        self.ball = body.get("ball")
-        self.ball_geom = model.geom("ball").id if ball else None
-        self.ball_qpos = model.jnt_qposadr[model.joint("ball").id] if ball else None
-        self.ball_qvel = model.jnt_dofadr[model.joint("ball").id] if ball else None
-        self.rate, self.stiffness = params.servo_rate, params.servo_stiffness
+        # the servos work in MuJoCo's joint order (contiguous slices); ``order`` maps it to JOINTS', ``inverse`` back
+        self.order = np.array([JOINT_NAMES.index(name) for name in TREE_ORDER])
+        self.inverse = np.argsort(self.order)
+        qpos = [model.jnt_qposadr[model.joint(name).id] for name in TREE_ORDER]
+        dofs = [model.jnt_dofadr[model.joint(name).id] for name in (*TREE_ORDER, *(f"rotor_{n}" for n in TREE_ORDER))]
+        assert qpos == list(range(7, 7 + N)) and dofs == list(range(6, 6 + 2 * N)), (qpos, dofs)
+        d = self.data
+        self.angles, self.speeds, self.rotor_speeds = d.qpos[7 : 7 + N], d.qvel[6 : 6 + N], d.qvel[6 + N : 6 + 2 * N]
         self.cap = model.tendon_frictionloss  # (N,), a view: the clutches' torque cap, set every step
-        self._force = np.zeros(6)
+        self.fastest, self.effort, self.motor = SPEED[self.order], EFFORT[self.order], MOTOR[self.order]
+        self.target = self.angles.copy()
+        self._slowest, self._error, self._buffer = -self.fastest, np.zeros(N), np.zeros(N)
+        self.tau = np.zeros(N)  # the clutches' torques over the last step, MuJoCo's order
+        mj.mj_forward(model, d)  # the clutches' friction rows come first among the constraints, in tendon order
+        friction = int(mj.mjtConstraint.mjCNSTR_FRICTION_TENDON)
+        assert (d.efc_type[:N] == friction).all() and (d.efc_id[:N] == np.arange(N)).all()
+        # every geom's kind (0 none, 1 ground, 2 robot, 3 ball) and body, for the contacts
+        self.geom_body = model.geom_bodyid.copy()
+        self.geom_kind = np.zeros(model.ngeom, dtype=int)
+        self.geom_kind[[model.geom(f"ground_{k}").id for k in range(len(ground_boxes))]] = GROUND
+        self.geom_kind[np.isin(self.geom_body, self.link_body)] = ROBOT
+        self._kind = self.geom_kind.tolist()
+        self._foot_of = [self.feet.index(b) if b in self.feet else -1 for b in self.geom_body.tolist()]  # 0, 1, -1
+        self.ball = body.get("ball")
+        if ball:
+            self.geom_kind[model.geom("ball").id] = BALL
+            self.ball_qpos = model.jnt_qposadr[model.joint("ball").id]
+            self.ball_qvel = model.jnt_dofadr[model.joint("ball").id]
+        self.rate, self.stiffness = params.servo_rate, params.servo_stiffness
         self.start: np.ndarray | None = None  # qpos of the start, saved by the body
 
     # ------------------------------------------------------------------ state
@@ -126,9 +143,11 @@ class MujocoWorld:
         mj.mj_resetData(self.model, d)
         d.qpos[:] = qpos
         mj.mj_forward(self.model, d)
+        self.tau[:] = 0.0
 
     def set_joints(self, angles) -> None:
-        self.data.qpos[self.qpos] = angles
+        """The joints at ``angles`` (rad, JOINTS order), at rest."""
+        self.angles[:] = np.asarray(angles)[self.order]
         self.mj.mj_kinematics(self.model, self.data)
 
     def set_torso(self, position, quaternion_xyzw) -> None:
@@ -141,9 +160,10 @@ class MujocoWorld:
     def torso_com(self) -> np.ndarray:
         return self.data.xipos[self.torso_body].copy()
 
-    def joints(self) -> tuple[np.ndarray, np.ndarray]:
-        d = self.data
-        return d.qpos[self.qpos], d.qvel[self.qvel]
+    def joints(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Angles (rad), speeds (rad/s) and the last step's motor torques (N m), JOINTS order."""
+        inverse = self.inverse
+        return self.angles[inverse], self.speeds[inverse], self.tau[inverse]
 
     def torso(self) -> tuple[tuple, np.ndarray, np.ndarray]:
         """The torso's centre of mass (m), its frame's rotation matrix (columns: its axes in the world) and its spin
@@ -156,61 +176,102 @@ class MujocoWorld:
         )
 
     # ------------------------------------------------------------------ acting
-    def step(self, target: np.ndarray, push=None) -> np.ndarray:
-        """One physics step of the servo law toward ``target`` (rad; see the module's docstring), with a ``push``
-        (N, world frame, at the torso's centre of mass) if given; returns the motor torques applied (N m)."""
-        d = self.data
-        error = target - d.qpos[self.qpos]
-        d.qvel[self.rotor_qvel] = np.clip(self.rate * error, -SPEED, SPEED)  # the speed target
-        self.cap[:] = np.minimum(self.stiffness * np.abs(error) + HOLD_TORQUE, EFFORT)
+    def aim(self, target: np.ndarray) -> None:
+        """The servos' position targets for the next steps (rad, JOINTS order, within the joints' limits)."""
+        self.target = target[self.order]
+
+    def step(self, push=None) -> float:
+        """One physics step of the servo law (the module's docstring) toward the targets, with a ``push`` (N, world
+        frame, at the torso's centre of mass) if given; returns the motors' power sum_i c_i tau_i^2 (W, (5.5))."""
+        d, error, buffer = self.data, self._error, self._buffer
+        np.subtract(self.target, self.angles, out=error)
+        np.multiply(error, self.rate, out=buffer)
+        np.minimum(np.maximum(buffer, self._slowest, out=buffer), self.fastest, out=self.rotor_speeds)  # speed target
+        np.abs(error, out=buffer)
+        np.minimum(
+            np.add(np.multiply(buffer, self.stiffness, out=buffer), HOLD_TORQUE, out=buffer), self.effort, out=self.cap
+        )
         if push is not None:
             d.xfrc_applied[self.torso_body, :3] = push
         self.mj.mj_step(self.model, d)
         if push is not None:
             d.xfrc_applied[self.torso_body, :3] = 0.0
-        # each clutch's friction force, the torque it put on its joint over the step (the tendon pulls q with +1)
-        tau = np.zeros(N)
-        rows = d.efc_type == self.friction_tendon
-        tau[d.efc_id[rows]] = d.efc_force[rows]
-        return tau
+        # each clutch's friction force is the torque it put on its joint over the step (the tendon is q - r)
+        tau = self.tau
+        tau[:] = d.efc_force[:N]
+        return float(self.motor @ (tau * tau))
 
     # ------------------------------------------------------------------ contacts
-    def _contacts(self, geoms: set[int], others: set[int]):
-        """(position, force on ``geoms``' side in the world frame, its body, normal force N) of every active contact
-        between ``geoms`` and ``others``."""
-        mj, m, d = self.mj, self.model, self.data
-        out = []
-        force6 = self._force
-        for i in range(d.ncon):
-            contact = d.contact[i]
-            g1, g2 = int(contact.geom1), int(contact.geom2)
-            if g2 in geoms and g1 in others:
-                sign, mine = 1.0, g2  # the contact force pushes geom2 along the normal (geom1 -> geom2)
-            elif g1 in geoms and g2 in others:
-                sign, mine = -1.0, g1
-            else:
+    def _contacts(self, kind: int):
+        """The robot's contacts with geoms of ``kind``: positions (n, 3), forces on the robot (n, 3, world), the
+        robot's bodies (n,) and normal forces (n,, N). Elliptic cones with condim 3: a contact's first three
+        constraint forces are its force in its own frame (normal, two tangents; MuJoCo's mj_contactForce)."""
+        d = self.data
+        n = d.ncon
+        if n == 0:
+            return None
+        contact = d.contact
+        geoms = contact.geom
+        kinds = self.geom_kind[geoms]
+        mine = (kinds[:, 1] == ROBOT) & (kinds[:, 0] == kind)  # the robot is geom2: the force pushes it along +n
+        theirs = (kinds[:, 0] == ROBOT) & (kinds[:, 1] == kind)
+        chosen = np.flatnonzero((mine | theirs) & (contact.efc_address >= 0))
+        if len(chosen) == 0:
+            return None
+        local = d.efc_force[contact.efc_address[chosen][:, None] + np.arange(3)]
+        frames = contact.frame[chosen].reshape(-1, 3, 3)  # rows: the normal (geom1 -> geom2), two tangents
+        sign = np.where(mine[chosen], 1.0, -1.0)
+        force = sign[:, None] * np.einsum("ni,nij->nj", local, frames)
+        bodies = self.geom_body[np.where(mine[chosen], geoms[chosen, 1], geoms[chosen, 0])]
+        return contact.pos[chosen], force, bodies, local[:, 0]
+
+    def foot_loads(self) -> list[list[tuple[float, float, float, float]]]:
+        """Per foot, (x, y, z, normal force N) of its sole's contacts with the ground, in plain floats (a foot has a
+        few; cheaper than numpy's calls). Elliptic cones: a contact's first constraint force is its normal force."""
+        d = self.data
+        loads = [[], []]
+        if d.ncon == 0:
+            return loads
+        contact = d.contact
+        kind, foot_of, efc = self._kind, self._foot_of, d.efc_force
+        for (g1, g2), address, (x, y, z) in zip(
+            contact.geom.tolist(), contact.efc_address.tolist(), contact.pos.tolist(), strict=True
+        ):
+            if address < 0:
                 continue
-            mj.mj_contactForce(m, d, i, force6)
-            frame = contact.frame.reshape(3, 3)  # rows: the normal, two tangents
-            out.append((contact.pos.copy(), sign * (force6[:3] @ frame), int(m.geom_bodyid[mine]), float(force6[0])))
+            if kind[g1] == GROUND and foot_of[g2] >= 0:
+                loads[foot_of[g2]].append((x, y, z, float(efc[address])))
+            elif kind[g2] == GROUND and foot_of[g1] >= 0:
+                loads[foot_of[g1]].append((x, y, z, float(efc[address])))
+        return loads
+
+    def foot_contacts(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray] | None]:
+        """Per foot, its sole's contacts with the ground: positions (n, 3), forces on the foot (n, 3), normal forces
+        (n,, N); None for a foot off the ground."""
+        found = self._contacts(GROUND)
+        if found is None:
+            return [None, None]
+        position, force, bodies, normal = found
+        out = []
+        for foot in self.feet:
+            on = bodies == foot
+            out.append((position[on], force[on], normal[on]) if on.any() else None)
         return out
 
-    def foot_contacts(self) -> list[list[tuple[np.ndarray, np.ndarray, float]]]:
-        """Per foot, (position, force on the foot, normal force N) of its sole's contacts with the ground."""
-        feet = self.feet
-        per_foot = [[], []]
-        for position, force, body, normal in self._contacts(self.robot_geoms, self.ground_geoms):
-            if body in feet:
-                per_foot[feet.index(body)].append((position, force, normal))
-        return per_foot
-
     def foot_frames(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Each foot's frame: origin (3,) and rotation (3, 3; columns: its axes in the world)."""
         d = self.data
         return [(d.xpos[b].copy(), d.xmat[b].reshape(3, 3).copy()) for b in self.feet]
 
-    def ball_contacts(self) -> list[tuple[np.ndarray, np.ndarray]]:
-        """(position, force on the robot) of the ball's contacts with the robot."""
-        return [(pos, force) for pos, force, _, _ in self._contacts(self.robot_geoms, {self.ball_geom})]
+    def foot_frames_flat(self) -> tuple[list, list]:
+        """Both feet's origins and row-major rotation matrices, as plain floats."""
+        d, feet = self.data, self.feet
+        return d.xpos[feet].tolist(), d.xmat[feet].tolist()
+
+    def ball_contacts(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The ball's contacts with the robot: positions (n, 3) and forces on the robot (n, 3), or None."""
+        found = self._contacts(BALL)
+        return None if found is None else found[:2]
 
     def link_poses(self) -> list[tuple[tuple, tuple]]:
         """Every simulated link's frame (position, quaternion x y z w), in LINKS order."""
@@ -281,9 +342,7 @@ class HumanoidMujoco(Humanoid):
         self.energy = 0.0  # E_e (5.6), J
         self.fell = self.left_lane = self.finished = False
         self.finish_time = math.nan
-        self._read_joints()
-        self.tau = np.zeros(N)
-        self._joint_lists = (self._joint_lists[0], self._joint_lists[1], [0.0] * N)
+        self._read_joints()  # the torques are 0 after a reset
         self._read_torso()
         rates = rates_of(self.telemetry)
         self._signal_every = rates.signal_every(p.control_dt)
@@ -360,46 +419,48 @@ class HumanoidMujoco(Humanoid):
 
     # ------------------------------------------------------------------ sensing
     def _read_joints(self) -> None:
-        q, dq = self.world.joints()
-        self.q, self.dq = q, dq
-        self._joint_lists = (q.tolist(), dq.tolist(), self.tau.tolist() if hasattr(self, "tau") else [0.0] * N)
+        self.q, self.dq, self.tau = self.world.joints()
+        self._joint_lists = (self.q.tolist(), self.dq.tolist(), self.tau.tolist())  # as plain floats, for sense
 
     def _read_torso(self) -> None:
         self.torso_position, self.torso_turn, self.torso_spin = self.world.torso()
 
     def _foot_pressure(self) -> list[float]:
         """The 8 FSR forces (N, FSR_NAMES order), shared out as ``Humanoid._foot_pressure`` does: each sole
-        contact's normal force split bilinearly between the toe and heel rows and the inner and outer columns."""
+        contact's normal force split bilinearly between the toe and heel rows and the inner and outer columns (the
+        shares add up to the force; a contact beyond a row or column counts as on it). Plain floats."""
         toe_x, heel_x = FSR_X
         inner_y, outer_y = FSR_Y
         length, width = toe_x - heel_x, outer_y - inner_y
         fsr = [0.0] * 8
-        world = self.world
-        if world.data.ncon == 0:
+        loads = self.world.foot_loads()
+        if not (loads[0] or loads[1]):
             return fsr
-        frames = world.foot_frames()
-        for k, contacts in enumerate(world.foot_contacts()):
+        origins, turns = self.world.foot_frames_flat()
+        for k, contacts in enumerate(loads):
             if not contacts:
                 continue
-            origin, rotation = frames[k]
+            ox, oy, oz = origins[k]
+            r0, r1, _, r3, r4, _, r6, r7, _ = turns[k]  # row-major; the foot's axes: columns
             side = 1.0 if k == 0 else -1.0  # the right foot is the left's mirror image in y
             toe_outer = toe_inner = heel_inner = heel_outer = 0.0
-            for position, _, normal in contacts:
-                x, y, _ = ((position - origin) @ rotation).tolist()  # into the foot's frame
-                y *= side
+            for px, py, pz, force in contacts:
+                dx, dy, dz = px - ox, py - oy, pz - oz
+                x = r0 * dx + r3 * dy + r6 * dz  # into the foot's frame
+                y = side * (r1 * dx + r4 * dy + r7 * dz)
                 toe = min(max((x - heel_x) / length, 0.0), 1.0)
                 outer = min(max((y - inner_y) / width, 0.0), 1.0)
-                toe_inner += normal * toe * (1 - outer)
-                toe_outer += normal * toe * outer
-                heel_inner += normal * (1 - toe) * (1 - outer)
-                heel_outer += normal * (1 - toe) * outer
+                toe_inner += force * toe * (1 - outer)
+                toe_outer += force * toe * outer
+                heel_inner += force * (1 - toe) * (1 - outer)
+                heel_outer += force * (1 - toe) * outer
             fsr[4 * k : 4 * k + 4] = toe_inner, toe_outer, heel_inner, heel_outer
         return fsr
 
     # ------------------------------------------------------------------ acting
     def actuate(self, command: np.ndarray) -> None:
         p, world = self.params, self.world
-        target = np.minimum(np.maximum(command, LOWER), UPPER)
+        world.aim(np.minimum(np.maximum(command, LOWER), UPPER))
         h = p.control_dt / p.substeps
         back = 0.0  # N s pressing the robot forward this tick (a push, the ball): the touch sensor `back`
         energy = self.energy
@@ -413,13 +474,10 @@ class HumanoidMujoco(Humanoid):
                     self._pushes.append((t, world.torso_com(), push))
             if self.ball_mass > 0 and t >= self.ball_time - 1e-9 and not self._ball_thrown:
                 self._throw()
-            tau = world.step(target, push)
+            energy += world.step(push) * h  # (5.5)-(5.6)
             if self._ball_thrown and t < self.ball_time + BALL_WATCH:
                 back += self._ball_contacts(t + h, h)
-            energy += float(MOTOR @ tau**2) * h  # (5.5)-(5.6)
-        self.tau = tau
-        self.q, self.dq = world.joints()
-        self._joint_lists = (self.q.tolist(), self.dq.tolist(), tau.tolist())
+        self._read_joints()
         self.energy = energy
         self.back = min(back / p.control_dt, MAX_BACK)
         self.ticks += 1
@@ -445,31 +503,31 @@ class HumanoidMujoco(Humanoid):
         self._ball_thrown = True
 
     def _ball_contacts(self, t: float, h: float) -> float:
-        """The ball's contact forces on the robot over this physics step (``Humanoid._ball_contacts``)."""
-        contacts = self.world.ball_contacts()
-        if not contacts:
+        """The ball's contact forces on the robot over this physics step (``Humanoid._ball_contacts``): forward
+        impulse and peak, arrows; returns the forward impulse of this step (N s; 0 when it presses backward)."""
+        found = self.world.ball_contacts()
+        if found is None:
             return 0.0
-        force = sum(f for _, f in contacts)
+        position, forces = found
+        force = forces.sum(axis=0)
         self.ball_impulse += float(force[0]) * h
         self.ball_peak = max(self.ball_peak, float(force[0]))
         if self._pushes is not None:
-            self._pushes.append((t, contacts[0][0], force))
+            self._pushes.append((t, position[0], force))
         return max(float(force[0]), 0.0) * h
 
     # ------------------------------------------------------------------ telemetry
     def _record_frame(self) -> None:
-        """Where every link is and the feet's contact forces (``Humanoid._record_frame``)."""
-        world = self.world
+        """Where every link is, and the feet's contact forces at their centres of pressure (as PyBullet's body)."""
         forces = []
-        for contacts in world.foot_contacts():
-            total = sum(normal for _, _, normal in contacts)
+        for found in self.world.foot_contacts():
+            total = 0.0 if found is None else float(found[2].sum())
             if total <= 0:
                 forces.append(np.zeros(6))
                 continue
-            centre = sum(position * normal for position, _, normal in contacts) / total  # centre of pressure
-            force = sum(f for _, f, _ in contacts)
-            forces.append(np.concatenate([centre, force]))
-        self._frames.append((self.t, world.link_poses(), np.array(forces)))
+            position, force, normal = found
+            forces.append(np.concatenate([normal @ position / total, force.sum(axis=0)]))
+        self._frames.append((self.t, self.world.link_poses(), np.array(forces)))
 
     def close(self) -> None:
         """Drop this body's MuJoCo models."""
