@@ -142,7 +142,7 @@ class MujocoWorld:
         mj, d = self.mj, self.data
         mj.mj_resetData(self.model, d)
         d.qpos[:] = qpos
-        mj.mj_forward(self.model, d)
+        mj.mj_kinematics(self.model, d)  # positions only: no contact before the first step, as in PyBullet
         self.tau[:] = 0.0
 
     def set_joints(self, angles) -> None:
@@ -336,7 +336,6 @@ class HumanoidMujoco(Humanoid):
         if start_noise > 0:
             offsets = np.random.default_rng(request.seed).normal(0.0, start_noise, N)
             world.set_joints(np.clip(self._start_pose + offsets, LOWER, UPPER))
-            world.mj.mj_forward(world.model, world.data)
         self.ticks, self.t = 0, 0.0
         self.back = 0.0  # N: the touch sensor `back` (see actuate)
         self.energy = 0.0  # E_e (5.6), J
