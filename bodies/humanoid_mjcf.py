@@ -33,8 +33,9 @@ import numpy as np
 
 from sfl_brain.bodies.humanoid_table import JOINTS, LINKS, PARTS
 
-#: MuJoCo's integrator: implicit in the actuators' velocity terms (the servo's damping; see the docstring)
-INTEGRATOR = "implicitfast"
+#: MuJoCo's integrator: semi-implicit Euler, its default (the servos are constraints, solved implicitly by MuJoCo's
+#: solver; no actuator or joint damping for implicitfast to take; 12 % cheaper per step, measured)
+INTEGRATOR = "Euler"
 #: the servos' rotors: far below the ground, out of everything's way, and so heavy (kg m^2 about their axis) that a
 #: clutch's few N m change their speed by under 1e-8 rad/s a step (the body sets it every step anyway)
 ROTOR_Z, ROTOR_ARMATURE = -50.0, 1e6

@@ -52,7 +52,8 @@ def test_the_mjcf_is_the_table():
         joint = model.joint(j.name)
         assert tuple(joint.range) == (j.lower, j.upper) and model.jnt_limited[joint.id], j.name
         assert tuple(joint.axis) == j.axis and model.body(model.jnt_bodyid[joint.id]).name == j.child, j.name
-        assert model.tendon_frictionloss[model.tendon(j.name).id] == j.effort  # the clutch at its effort until the first step
+        # the clutch at its effort until the first step
+        assert model.tendon_frictionloss[model.tendon(j.name).id] == j.effort
     assert sorted(TREE_ORDER) == sorted(j.name for j in JOINTS)
     assert sum(model.geom_bodyid[g] in robot for g in range(model.ngeom)) == sum(p.collides for p in PARTS)
     for side in "lr":
