@@ -1,30 +1,29 @@
 """The NAO-sized humanoid as a MuJoCo model (MJCF), generated from the same table as its URDF (issue 31).
 
 ``robot_mjcf()`` writes the robot of ``humanoid_table.py`` as ``humanoid.urdf_text()`` does: one MuJoCo body per
-simulated link (torso first, a free joint), its mass, centre of mass and full inertia tensor from
-``humanoid.link_inertial`` (the parts' boxes, parallel axes), a box geom for every part that touches the ground, a
-hinge for every driven joint at the child's origin (NAO's origin, axis and limits) and a velocity actuator on it, whose
-speed target and force cap the body sets every physics step (``humanoid_mujoco.MujocoWorld.step``: the servo law of
-``Humanoid.actuate``). ``world_mjcf(ground_boxes, ball)`` adds the ground (static boxes, the PyBullet body's) and,
-when asked for, a free ball.
+simulated link (torso first, on a free joint), its mass, centre of mass and full inertia tensor from
+``humanoid.link_inertial`` (the parts' boxes, parallel axes), a box geom for every part that touches the ground, and a
+hinge for every driven joint at the child's origin (NAO's origin, axis and limits). ``world_mjcf(ground_boxes, ...)``
+adds the ground (static boxes, the PyBullet body's) and, when asked for, a free ball.
+
+**The servos.** PyBullet's position servo (``Humanoid.actuate``: every physics step a speed target
+``servo_rate (q_cmd - q)`` within the joint's speed, reached by a velocity-motor constraint whose force is at most
+``servo_stiffness |q_cmd - q| + HOLD_TORQUE`` within the effort) is a slip clutch: a constraint that drives a velocity
+to a target with a bounded force. MuJoCo has that constraint: friction loss, which drives a velocity to zero with a
+force of at most ``frictionloss``, solved with the contacts. Each driven joint q gets a rotor r (a hinge on its own
+body in the world, so heavy that the clutch cannot slow it) and a fixed tendon q - r with friction loss: the body sets
+the rotor's speed to the speed target and the tendon's friction loss to the cap before every physics step
+(``humanoid_mujoco.MujocoWorld.step``), and reads the torque the clutch applied from its constraint force. The law is
+the PyBullet body's, written out in our code; only the constraint that enforces it is MuJoCo's.
 
 Everything here that is not in the table is a MuJoCo setting, each with its source or its calibration
-(``docs/calibration/humanoid_mujoco.py`` measures them; docs/bodies/humanoid.md, "Two engines"):
+(``docs/calibration/humanoid_mujoco.py`` measures them beside PyBullet; docs/bodies/humanoid.md, "Two engines"):
 
-* ``INTEGRATOR`` = implicitfast: the servo's velocity gain is integrated implicitly (MuJoCo's documentation: the
-  integrator for stiff actuator damping); an explicit gain must stay below 2 I / h, 0.08 N m s/rad for a foot's roll
-  (I about 1e-4 kg m^2, h = 2.5 ms), too weak to be a servo.
-* the velocity actuators' gain ``servo_kv`` (N m s/rad), standing in for PyBullet's velocity motor (a constraint that
-  reaches its target in one step unless the force cap binds): ``servo_stiffness / servo_rate`` (5), at which the
-  unclamped servo's torque at rest, kv rate |error|, is the cap's stiffness |error|. Above it the cap binds whenever
-  a joint is near rest, the force flips between +-cap (a relay) and the standing robot chatters or falls (measured,
-  docs/calibration/humanoid_mujoco.py --servo: kv 10, 20, 50).
-* ``CONTACT_SOLREF`` (time constant s, damping ratio) and ``CONTACT_SOLIMP``: the contacts' softness; MuJoCo's
-  default time constant (0.02 s) lets the standing robot sink 2-3 mm into the ground and bounce; calibrated.
 * contact types: the robot does not collide with itself (PyBullet's default for a URDF); parents and children never do
-  in MuJoCo, and the bit masks below keep the others apart too.
-* friction: MuJoCo takes the larger of two geoms' coefficients (PyBullet their product); both the ground and the
-  robot get the body's ``friction``, so the pair's is that value, as in PyBullet (robot 1.0 x ground ``friction``).
+  in MuJoCo, and the bit masks below keep the others apart too;
+* friction: MuJoCo takes the larger of two geoms' coefficients (PyBullet their product); both the ground and the robot
+  get the body's ``friction``, so the pair's is that value, as in PyBullet (robot 1.0 x ground ``friction``);
+* the constants below.
 """
 
 from __future__ import annotations

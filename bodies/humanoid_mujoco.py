@@ -12,12 +12,11 @@ Chosen in a scenario by ``modules.body.params.physics: mujoco`` on the ``humanoi
 (``pip install -e '.[mujoco]'``); it is imported when a MuJoCo body is made, never by the core, and without it
 ``physics: mujoco`` is refused by ``sfl check`` with the command that installs it.
 
-**Servo** (``Humanoid.actuate``'s law, every physics step, in Python): speed target ``servo_rate * (q_cmd - q)``
-clipped to the joint's speed, torque cap ``servo_stiffness * |q_cmd - q| + HOLD_TORQUE`` within the joint's effort.
-PyBullet reaches the speed target with a velocity-motor constraint limited by the cap; here each joint's velocity
-actuator gives ``SERVO_KV * (target - dq)`` limited by the same cap (its force range, set every step), integrated
-implicitly. The torque the sensors and the energy read is the one applied over the step: the cap when it binds,
-otherwise ``SERVO_KV * (target - dq)`` at the step's end velocity (the implicit integrator's force).
+**Servo** (``Humanoid.actuate``'s law, every physics step): speed target ``servo_rate * (q_cmd - q)`` clipped to the
+joint's speed, torque at most ``servo_stiffness * |q_cmd - q| + HOLD_TORQUE`` within the joint's effort. PyBullet
+reaches the speed target with a velocity-motor constraint limited by that cap; here a clutch does (a tendon between the
+joint and a rotor turned at the speed target, its friction loss the cap: ``humanoid_mjcf.py``), and the torque the
+sensors and the energy read is the clutch's constraint force over the step.
 
 **Speed and determinism.** One model per terrain (and ball or not), compiled once; every trial resets the data to the
 saved start (``mj_resetData``, then the start's positions): MuJoCo keeps no contact cache across steps, so the same
