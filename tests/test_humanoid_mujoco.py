@@ -121,15 +121,19 @@ def test_the_cpg_gait_walks_and_the_same_request_gives_the_same_trial():
 
 
 def test_a_missing_mujoco_is_a_clear_error_naming_the_extra_and_the_core_never_imports_it():
-    code = (
-        "import sys; sys.modules['mujoco'] = None\n"  # as if not installed
-        "import sfl_brain.bodies.humanoid as h, sfl_brain.bodies.humanoid_mujoco, sfl_brain.cli\n"
-        "h.Humanoid.Params(physics='mujoco')\n"
-    )
+    check = ["check", str(SCENARIOS / "humanoid_walk.yaml"), "--set", MUJOCO]
+    absent = "import sys; sys.modules['mujoco'] = None; "  # as if mujoco were not installed
+    code = absent + f"sys.argv = ['sfl', *{check!r}]; from sfl_brain.cli import main; main()"
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
-    assert done.returncode == 1
-    assert "physics: mujoco needs MuJoCo, an optional extra of sfl-brain: pip install -e '.[mujoco]'" in done.stderr
-    code = "import sys, sfl_brain.bodies.humanoid, sfl_brain.bodies.humanoid_mujoco; print('mujoco' in sys.modules)"
+    assert done.returncode == 2  # sfl check refuses the scenario, as if mujoco were not installed
+    assert (
+        "humanoid_walk.yaml: modules.body.params.physics: physics: mujoco needs MuJoCo, an optional extra of "
+        "sfl-brain: pip install -e '.[mujoco]'"
+    ) in done.stderr
+    code = (
+        "import sys, sfl_brain.cli, sfl_brain.bodies.humanoid, sfl_brain.bodies.humanoid_mujoco; "
+        "print('mujoco' in sys.modules)"
+    )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert done.stdout.strip() == "False", done.stderr
     with pytest.raises(ImportError, match=r"pip install -e '\.\[mujoco\]'"):
