@@ -126,6 +126,7 @@ class MujocoWorld:
         self.geom_kind[[model.geom(f"ground_{k}").id for k in range(len(ground_boxes))]] = GROUND
         self.geom_kind[np.isin(self.geom_body, self.link_body)] = ROBOT
         self._kind = self.geom_kind.tolist()
+        self.elliptic = model.opt.cone == mj.mjtCone.mjCONE_ELLIPTIC
         self._foot_of = [self.feet.index(b) if b in self.feet else -1 for b in self.geom_body.tolist()]  # 0, 1, -1
         self.ball = body.get("ball")
         if ball:
@@ -217,7 +218,14 @@ class MujocoWorld:
         chosen = np.flatnonzero((mine | theirs) & (contact.efc_address >= 0))
         if len(chosen) == 0:
             return None
-        local = d.efc_force[contact.efc_address[chosen][:, None] + np.arange(3)]
+        if self.elliptic:
+            local = d.efc_force[contact.efc_address[chosen][:, None] + np.arange(3)]
+        else:  # pyramidal cones: the constraint forces are the pyramid's edges (see _pyramid_normal)
+            local = np.zeros((len(chosen), 3))
+            force = np.zeros(6)
+            for row, i in enumerate(chosen.tolist()):
+                self.mj.mj_contactForce(self.model, d, i, force)
+                local[row] = force[:3]
         frames = contact.frame[chosen].reshape(-1, 3, 3)  # rows: the normal (geom1 -> geom2), two tangents
         sign = np.where(mine[chosen], 1.0, -1.0)
         force = sign[:, None] * np.einsum("ni,nij->nj", local, frames)
@@ -232,17 +240,29 @@ class MujocoWorld:
         if d.ncon == 0:
             return loads
         contact = d.contact
-        kind, foot_of, efc = self._kind, self._foot_of, d.efc_force
-        for (g1, g2), address, (x, y, z) in zip(
-            contact.geom.tolist(), contact.efc_address.tolist(), contact.pos.tolist(), strict=True
+        kind, foot_of = self._kind, self._foot_of
+        normal = d.efc_force if self.elliptic else self._pyramid_normal
+        for i, ((g1, g2), address, (x, y, z)) in enumerate(
+            zip(contact.geom.tolist(), contact.efc_address.tolist(), contact.pos.tolist(), strict=True)
         ):
             if address < 0:
                 continue
             if kind[g1] == GROUND and foot_of[g2] >= 0:
-                loads[foot_of[g2]].append((x, y, z, float(efc[address])))
+                loads[foot_of[g2]].append((x, y, z, float(normal[address if self.elliptic else i])))
             elif kind[g2] == GROUND and foot_of[g1] >= 0:
-                loads[foot_of[g1]].append((x, y, z, float(efc[address])))
+                loads[foot_of[g1]].append((x, y, z, float(normal[address if self.elliptic else i])))
         return loads
+
+    @property
+    def _pyramid_normal(self) -> list[float]:
+        """Every contact's normal force (N) from MuJoCo's mj_contactForce: with pyramidal cones (not shipped: the
+        calibration compares them) the constraint forces are the pyramid's edges, not the normal force."""
+        force = np.zeros(6)
+        out = []
+        for i in range(self.data.ncon):
+            self.mj.mj_contactForce(self.model, self.data, i, force)
+            out.append(float(force[0]))
+        return out
 
     def foot_contacts(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray] | None]:
         """Per foot, its sole's contacts with the ground: positions (n, 3), forces on the foot (n, 3), normal forces
