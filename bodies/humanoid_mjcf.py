@@ -41,13 +41,16 @@ ROTOR_Z, ROTOR_ARMATURE = -50.0, 1e6
 #: the clutches' softness (time constant s, damping ratio): the velocity error's time constant, 2 physics steps
 #: (MuJoCo's smallest recommended); PyBullet's motor constraint reaches its target in one step
 SERVO_SOLREF = (0.005, 1.0)
-#: contact softness: (time constant s, damping ratio) and impedance (d0, d_width, width m, midpoint, power);
-#: MuJoCo's rule: the time constant at least 2 physics steps (5 ms at 400 Hz); calibrated (docs/calibration/
-#: humanoid_mujoco.py --contact): the standing robot sinks under 1 mm, as in PyBullet
+#: contact softness: (time constant s, damping ratio) and impedance (d0, d_width, width m, midpoint, power); MuJoCo's
+#: rule: the time constant at least 2 physics steps (5 ms at 400 Hz). Calibrated (docs/calibration/humanoid_mujoco.py
+#: --contact, 2026-11-27): 5, 10 and 20 ms all stand (51.0 N on the feet, sinking 1.0-1.3 mm; PyBullet 2.0 mm) and walk
+#: both gaits 3/3 (CPG 12.4-13.1 s elliptic); 10 ms, the middle one. The impedance: stiffer than MuJoCo's default
+#: (0.9, 0.95, 0.001), so that the robot's weight compresses the contact less (chosen here)
 CONTACT_SOLREF = (0.01, 1.0)
 CONTACT_SOLIMP = (0.95, 0.99, 0.001, 0.5, 2.0)
-#: friction cone: elliptic (MuJoCo's pyramidal default made the standing robot's soles chatter: the feet's load
-#: +-6 N s.d. over a second after 5 s, against +-0.2 N elliptic; docs/calibration/humanoid_mujoco.py --contact)
+#: friction cone: elliptic, MuJoCo's accurate one (its pyramidal default approximates the cone by its edges). Measured
+#: (--contact): pyramidal also stands and walks, but the CPG gait drifts further sideways (lateral up to 0.18 m against
+#: 0.11 m at 10 ms, 0.37 against 0.16 at 20 ms, 3 seeds)
 CONE = "elliptic"
 #: MuJoCo's Newton solver converges in a few iterations (its default: 100 at most, tolerance 1e-8); the PyBullet
 #: body's ``solver_iterations`` is its own solver's (projected Gauss-Seidel) and does not carry over
