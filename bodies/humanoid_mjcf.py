@@ -38,8 +38,10 @@ INTEGRATOR = "Euler"
 #: the servos' rotors: far below the ground, out of everything's way, and so heavy (kg m^2 about their axis) that a
 #: clutch's few N m change their speed by under 1e-8 rad/s a step (the body sets it every step anyway)
 ROTOR_Z, ROTOR_ARMATURE = -50.0, 1e6
-#: the clutches' softness (time constant s, damping ratio): the velocity error's time constant, 2 physics steps
-#: (MuJoCo's smallest recommended); PyBullet's motor constraint reaches its target in one step
+#: the clutches' softness (time constant s, damping ratio): 2 physics steps, the stiffest MuJoCo allows (its refsafe
+#: floor); PyBullet's motor constraint is hard. Calibrated (docs/calibration/humanoid_mujoco.py --servo, 2026-11-27):
+#: 5 ms stands (51.0 N, 3.0 J) and walks both gaits 3/3; 10 ms: the open-loop gait falls 3/3 at 1.5 s, the CPG gait 1/3;
+#: 20 ms: even standing falls
 SERVO_SOLREF = (0.005, 1.0)
 #: contact softness: (time constant s, damping ratio) and impedance (d0, d_width, width m, midpoint, power); MuJoCo's
 #: rule: the time constant at least 2 physics steps (5 ms at 400 Hz). Calibrated (docs/calibration/humanoid_mujoco.py
