@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 from pydantic import Field
@@ -65,6 +66,8 @@ class AnalyticBody(Body):
     @property
     def done(self) -> bool:
         return True
+
+    METRICS: ClassVar[dict[str, str]] = {"distance_to_centre": "unit space"}
 
     def outcome(self) -> tuple[bool, float, dict]:
         return self.success, self.quality, {"distance_to_centre": self.distance_to_centre}

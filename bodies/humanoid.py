@@ -57,7 +57,7 @@ import hashlib
 import math
 import os
 import tempfile
-from typing import Literal
+from typing import ClassVar, Literal
 
 import numpy as np
 from pydantic import Field, field_validator
@@ -371,7 +371,7 @@ class Humanoid(Body):
         self.tau = np.zeros(N)
         self.fell = self.left_lane = self.finished = False
         self.finish_time = math.nan
-        self._read_joints()
+        self._start_joints()
         self._read_torso()
         # a logged trial keeps samples of its signals and pictures of the body at the sink's rates
         rates = rates_of(self.telemetry)
@@ -491,6 +491,15 @@ class Humanoid(Body):
         q, dq, _, tau = (list(column) for column in zip(*states, strict=True))
         self.q, self.dq, self.tau = np.array(q), np.array(dq), np.array(tau)
         self._joint_lists = (q, dq, tau)  # the same as plain floats, for sense
+
+    def _start_joints(self) -> None:
+        """The joints at a trial's start: their angles and velocities as set, and no torque, since no motor has
+        acted yet (PyBullet's joint state still holds the last trial's last applied torque, which the first frame
+        would report: a trial's start would depend on the trial before it, issue 32)."""
+        self._read_joints()
+        q, dq, _ = self._joint_lists
+        self.tau = np.zeros(N)
+        self._joint_lists = (q, dq, [0.0] * N)
 
     def _read_torso(self) -> None:
         """The torso's centre of mass, its own frame's rotation matrix, and its spin in that frame."""
@@ -658,6 +667,20 @@ class Humanoid(Body):
     @property
     def done(self) -> bool:
         return self.fell or self.left_lane or self.finished or self.t >= self.params.duration - 1e-9
+
+    METRICS: ClassVar[dict[str, str]] = {
+        "distance": "m",
+        "lateral": "m",
+        "time": "s",
+        "velocity": "m/s",
+        "energy": "J",
+        "mean_power": "W",
+        "fell": "",
+        "left_lane": "",
+        "timed_out": "",
+        "ball_impulse": "N s",
+        "ball_peak_force": "N",
+    }
 
     def outcome(self) -> tuple[bool, float, dict]:
         p = self.params

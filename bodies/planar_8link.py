@@ -114,6 +114,7 @@ Terrain: a constant ``slope_deg`` or a profile ``terrain`` (as ``planar_biped``)
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
 import numpy as np
 import pymunk
@@ -702,6 +703,23 @@ class PlanarWalker8(Body):
     @property
     def done(self) -> bool:
         return self.fell or self.t >= self.params.duration - 1e-9
+
+    METRICS: ClassVar[dict[str, str]] = {
+        "distance": "m",
+        "velocity": "m/s",
+        "steps": "",
+        "time": "s",
+        "energy": "J",
+        "fell": "",
+        "fell_at": "s",
+        "pushed": "",
+        "push_onset": "s",
+        "push_duration": "s",
+        "push_impulse": "N s",
+        "push_anchor": "s",
+        "gait_period": "s",
+        "push_missed": "",
+    }
 
     def outcome(self) -> tuple[bool, float, dict]:
         distance = self._hip_x() - self.x_start

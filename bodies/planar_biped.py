@@ -29,6 +29,7 @@ Terrain: a constant slope ``slope_deg`` or a piecewise profile ``terrain``: a st
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
 import numpy as np
 import pymunk
@@ -369,6 +370,15 @@ class PlanarBiped(Body):
     @property
     def done(self) -> bool:
         return self.fell or self.t >= self.params.duration - 1e-9
+
+    METRICS: ClassVar[dict[str, str]] = {
+        "distance": "m",
+        "velocity": "m/s",
+        "steps": "",
+        "time": "s",
+        "energy": "J",
+        "fell": "",
+    }
 
     def outcome(self) -> tuple[bool, float, dict]:
         p = self.params

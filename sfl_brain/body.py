@@ -111,6 +111,9 @@ class Body(Module):
     #: the recording's default layout for a run of this body (``sfl_brain.rrlog.LAYOUTS``): "walker" (a planar
     #: walker's y-up pictures) or "humanoid" (3-D boxes, z up, with the terrain switch over the torso pitch)
     LAYOUT: ClassVar[str] = "walker"
+    #: the unit of each metric :meth:`outcome` reports ("" for counts, flags and ratios): the ``m_<metric>`` columns
+    #: of ``trials.parquet`` carry it in their schema (a metric not named here has none)
+    METRICS: ClassVar[dict[str, str]] = {}
 
     def __init__(self, params: BodyParams | None = None, *, seed: int = 0) -> None:
         super().__init__(params, seed=seed)

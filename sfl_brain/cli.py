@@ -375,6 +375,9 @@ def _describe(cls, reference: str) -> list[str]:
             lines += ["", *table(cls.COMMANDS, "commands (one tick, in this order)")]
         if not cls.COMMANDS:
             lines += ["", "takes no commands: it needs no controller"]
+        if cls.METRICS:
+            shown = ", ".join(f"{name} ({unit})" if unit else name for name, unit in cls.METRICS.items())
+            lines += ["", f"trial metrics (m_<metric> columns): {shown}"]
     if issubclass(cls, Controller):
         reads, writes = cls.signals(cls.Params())  # a CPG's depend on its circuit: here the default one's
         depends = " (with the default parameters)" if (reads, writes) != (cls.READS, cls.WRITES) else ""

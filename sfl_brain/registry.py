@@ -35,8 +35,13 @@ def registered() -> dict[str, str]:
 
 
 def nearest(name: str, choices) -> str | None:
-    found = difflib.get_close_matches(name, list(choices), n=1, cutoff=0.5)
-    return found[0] if found else None
+    """The valid name a user most likely meant by ``name`` (None when none is close): case does not count, so
+    ``CMA`` finds ``cma`` and ``Distance`` finds ``distance``."""
+    by_lower: dict[str, str] = {}
+    for choice in choices:
+        by_lower.setdefault(str(choice).lower(), choice)
+    found = difflib.get_close_matches(str(name).lower(), list(by_lower), n=1, cutoff=0.5)
+    return by_lower[found[0]] if found else None
 
 
 class _ImportTimeout(BaseException):

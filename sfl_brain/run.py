@@ -440,7 +440,7 @@ def run(
                 # a full disk: rerun's writer has stopped, do not wait the healthy disk's time for it
                 lambda: rr_log.close(timeout=2.0 if exit_code == EXIT_ENVIRONMENT else RERUN_FLUSH_TIMEOUT),
                 lambda: merge_recordings(run_dir),
-                lambda: write_tables(run_dir, plan.raw.get("space", [])),
+                lambda: write_tables(run_dir, plan.raw.get("space", []), plan.body_class.METRICS),
             ):
                 try:
                     step()

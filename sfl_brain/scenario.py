@@ -536,11 +536,14 @@ def problems_from(exc: ValidationError, model: type[BaseModel], prefix: tuple = 
         elif kind == "union_tag_invalid":
             ctx = err.get("ctx", {})
             tags = [t.strip().strip("'") for t in str(ctx.get("expected_tags", "")).split(",")]
+            discriminator = str(ctx.get("discriminator", "kind")).strip("'")
+            # the tag as written (pydantic's context has it as a string: an empty value would read 'None')
+            tag = given.get(discriminator) if isinstance(given, dict) else ctx.get("tag")
             out.append(
                 Problem(
                     path + ".kind" if path else "kind",
-                    f"expected one of {ctx.get('expected_tags')}; got {_short(ctx.get('tag'))}",
-                    nearest(str(ctx.get("tag")), tags),
+                    f"expected one of {ctx.get('expected_tags')}; got {_short(tag)}",
+                    nearest(str(tag), tags) if tag is not None else None,
                 )
             )
         elif kind in EXPECTED:
@@ -595,6 +598,11 @@ class Plan:
     @property
     def dim(self) -> int:
         return len(self.scenario.space)
+
+    @property
+    def body_class(self) -> type:
+        """The class of the run's body (every body worker runs the same ``modules.body``)."""
+        return next(i.cls for i in self.instances if i.name in self.bodies)
 
     @property
     def lockstep_processes(self) -> list[str]:

@@ -41,6 +41,8 @@ class Column:
 
 
 _f8, _i8, _b = pa.float64(), pa.int64(), pa.bool_()
+#: a list of float64 as a Parquet file holds it (its item is named `element`, as ``pq.read_schema`` shows it)
+_list_f8 = pa.list_(pa.field("element", _f8))
 
 DECISION_COLUMNS: tuple[Column, ...] = (
     Column("decision", _i8, "", "index of the decision in the run, from 0"),
@@ -49,7 +51,7 @@ DECISION_COLUMNS: tuple[Column, ...] = (
     Column("s_vig", _f8, "", "vigilance threshold the decision used"),
     Column("d_success", _f8, "unit space", "distance to the success map's winner (3.1)"),
     Column("d_failure", _f8, "unit space", "distance to the failure map's winner (3.2)"),
-    Column("v_unit", pa.list_(_f8), "unit space", "the candidate, one coordinate in [0, 1] per axis"),
+    Column("v_unit", _list_f8, "unit space", "the candidate, one coordinate in [0, 1] per axis"),
 )
 
 TRIAL_COLUMNS: tuple[Column, ...] = (
@@ -70,7 +72,7 @@ TRIAL_COLUMNS: tuple[Column, ...] = (
     Column("failure_winner", _i8, "", "the failure map's winning neuron for the trial's point, before it learnt"),
     Column("worker", pa.string(), "", "the body worker that ran the trial"),
     Column("wall_ms", _f8, "ms", "wall time of the trial, request to result (not reproducible)"),
-    Column("v_unit", pa.list_(_f8), "unit space", "the tried point, one coordinate in [0, 1] per axis"),
+    Column("v_unit", _list_f8, "unit space", "the tried point, one coordinate in [0, 1] per axis"),
     Column("condition", pa.string(), "", "the named condition the trial ran under (conditions protocol)"),
     Column("repeat", _i8, "", "which start (trial seed) of its condition and grid point, from 0 (conditions protocol)"),
     Column("survived", _b, "", "the trial's verdict by protocol.judge: success, or upright (no fall)"),
@@ -85,7 +87,7 @@ MAP_COLUMNS: tuple[Column, ...] = (
         "final", _b, "", "the maps as the run leaves them, after pruning (thesis §4.4.3), at the last trial's index"
     ),
     Column("neuron", _i8, "", "index of the neuron, row-major over the map's grid (`shape`)"),
-    Column("weights", pa.list_(_f8), "unit space", "the neuron's weight vector, one coordinate in [0, 1] per axis"),
+    Column("weights", _list_f8, "unit space", "the neuron's weight vector, one coordinate in [0, 1] per axis"),
     Column("active", _b, "", "False for a failure neuron switched off by pruning"),
 )
 
@@ -94,7 +96,9 @@ def _field(col: Column) -> pa.Field:
     return pa.field(col.name, col.type, nullable=True, metadata={"unit": col.unit, "meaning": col.meaning})
 
 
-def _schema(base: tuple[Column, ...], rows: list[dict], axes: list[dict]) -> pa.Schema:
+def _schema(
+    base: tuple[Column, ...], rows: list[dict], axes: list[dict], metric_units: dict[str, str] | None = None
+) -> pa.Schema:
     present = set().union(*(r.keys() for r in rows)) if rows else set()
     fields = [_field(c) for c in base if c.name in present]
     for axis in axes:
@@ -104,7 +108,8 @@ def _schema(base: tuple[Column, ...], rows: list[dict], axes: list[dict]) -> pa.
         kind = _metric_type(r.get(name) for r in rows)
         fields.append(_field(Column(name, kind, "", f"trial parameter `{name}` set by the conditions protocol")))
     for name in sorted(k for k in present if k.startswith("m_")):
-        fields.append(_field(Column(name, _metric_type(r.get(name) for r in rows), "", f"body metric `{name[2:]}`")))
+        unit = (metric_units or {}).get(name[2:], "")  # as the body declares it (Body.METRICS)
+        fields.append(_field(Column(name, _metric_type(r.get(name) for r in rows), unit, f"body metric `{name[2:]}`")))
     return pa.schema(fields)
 
 
@@ -119,7 +124,7 @@ def _metric_type(values) -> pa.DataType:
     if any(isinstance(v, str) for v in seen):  # text, or a grid of text and numbers: kept as text
         return pa.string()
     if seen and all(isinstance(v, list) for v in seen):
-        return pa.list_(_f8)
+        return _list_f8
     return _f8
 
 
@@ -137,11 +142,12 @@ def _table(rows: list[dict], schema: pa.Schema) -> pa.Table:
     return pa.table(columns, schema=schema)
 
 
-def write_tables(run_dir: Path, axes: list[dict]) -> list[Path]:
+def write_tables(run_dir: Path, axes: list[dict], metric_units: dict[str, str] | None = None) -> list[Path]:
     """Write ``decisions.parquet`` and ``trials.parquet`` from the run's records, and ``maps.parquet``
     from the module processes' parts; returns the paths.
 
-    ``axes``: the scenario's ``space`` entries (name, target, unit). A kind with no row gets no file.
+    ``axes``: the scenario's ``space`` entries (name, target, unit); ``metric_units``: the body's metric units
+    (``Body.METRICS``) for the ``m_<metric>`` columns. A kind with no row gets no file.
     """
     run_dir = Path(run_dir)
     rows = read_records(run_dir)
@@ -152,7 +158,7 @@ def write_tables(run_dir: Path, axes: list[dict]) -> list[Path]:
             continue
         if kind == "trial":  # in trial order (workers finish them in any order)
             of_kind.sort(key=lambda r: r.get("trial", 0))
-        schema = _schema(base, of_kind, axes)
+        schema = _schema(base, of_kind, axes, metric_units)
         path = run_dir / f"{kind}s.parquet"
         pq.write_table(_table(of_kind, schema), path)
         written.append(path)
@@ -177,7 +183,7 @@ def map_rows(item: MapSnapshots, module: str) -> pa.Table:
         "neuron": pa.array(np.tile(np.arange(size, dtype=np.int64), k)),
         "weights": pa.FixedSizeListArray.from_arrays(
             pa.array(np.asarray(item.weights, dtype=np.float64).reshape(-1)), item.weights.shape[2]
-        ).cast(pa.list_(_f8)),
+        ).cast(_list_f8),
         "active": pa.array(np.asarray(item.active, dtype=bool).reshape(-1)),
     }
     return pa.table(columns, schema=MAP_SCHEMA)

@@ -93,3 +93,10 @@ def test_proposers_benchmark_prints_each_proposers_cost_beside_the_trial():
     out = bench("proposers.py", "--trials", "5", "--repeats", "1", "--kinds", "cma")
     assert "load average" in out
     figures(out, r"  cma +[\d.]+ +[\d.]+ +[\d.]+ +[\d.]+ +([\d.]+) %")
+
+
+def test_gym_benchmark_prints_the_door_against_the_bodys_own_tick():
+    out = bench("gym.py", "--rounds", "2", "--block", "20", "--vector", "0")
+    # per body: the body alone, the door unwrapped, through gymnasium.make, normalised; their ratios to the first
+    figures(out, r"median +([\d.]+) us", count=8)
+    figures(out, r"/ \(a\) +([\d.]+)", count=8)

@@ -61,19 +61,38 @@ def test_both_doors_pass_check_env_on_the_humanoid():
     assert len(said) == 1 and NORMALISE in said[0]
 
 
+@pytest.mark.parametrize("scenario", [WALKER, HUMANOID], ids=["walker", "humanoid"])
+def test_normalized_doors_pass_check_env_without_a_word(scenario):
+    """``normalize=True``: actions in [-1, 1], float32 everywhere, the observations within their box: Gymnasium's
+    checker says nothing, and the spaces are what stable-baselines3's checker asks for (a symmetric [-1, 1] float32
+    action box; docs/gymnasium.md shows its check_env passing too)."""
+    for env_id in (sfl_gym.TRIAL_ID, sfl_gym.TICK_ID):
+        env = gym.make(env_id, scenario=str(scenario), normalize=True).unwrapped
+        with warnings.catch_warnings(record=True) as seen:
+            warnings.simplefilter("always")
+            check_env(env)
+        assert [str(w.message) for w in seen] == [], env_id
+        box = env.action_space
+        assert box.dtype == np.float32 and np.all(box.low == -1.0) and np.all(box.high == 1.0), env_id
+        assert env.observation_space.dtype == np.float32
+        env.close()
+
+
 def test_the_spaces_are_the_scenarios_and_the_bodys_signals():
     trial = sfl_gym.TrialEnv(WALKER)
-    assert trial.action_space == gym.spaces.Box(0.0, 1.0, (2,), np.float64)
-    assert trial.observation_space == gym.spaces.Box(0.0, 1.0, (3,), np.float64)
+    assert trial.action_space == gym.spaces.Box(0.0, 1.0, (2,), np.float32)
+    assert trial.observation_space == gym.spaces.Box(0.0, 1.0, (3,), np.float32)
     tick = sfl_gym.TickEnv(WALKER)
     assert [s.name for s in tick.commands] == ["v_hip_l", "v_hip_r", "v_knee_l", "v_knee_r"]
     assert np.all(tick.action_space.low == -12.0) and np.all(tick.action_space.high == 12.0)
     knee_l = tick.sensors[2]
     assert knee_l.name == "knee_l" and knee_l.unit == "rad"
     slack = SENSOR_SLACK * (knee_l.high - knee_l.low)
-    assert tick.observation_space.low[2] == knee_l.low - slack and tick.observation_space.high[2] == knee_l.high + slack
+    assert tick.observation_space.low[2] == np.float32(knee_l.low - slack)
+    assert tick.observation_space.high[2] == np.float32(knee_l.high + slack)
     observation, info = tick.reset(seed=0)
-    assert np.array_equal(observation, tick.body.sense()) and info["params"]["body"] == {"slope_deg": 0.0}
+    assert observation.dtype == np.float32 and np.array_equal(observation, tick.body.sense().astype(np.float32))
+    assert info["params"]["body"] == {"slope_deg": 0.0}
     assert info["params"]["controller"] == {"alpha_hip": 10.0, "theta_hip_max_deg": 120.0}  # the space's centre
     trial.close()
     tick.close()
@@ -105,7 +124,7 @@ def test_an_episode_is_the_trial_sfl_brain_local_runs_for_the_same_point_and_see
         observation, reward, terminated, truncated, info = env.step(np.array(unit))
         assert reward == (result.quality if result.success else 0.0)
         assert (terminated, truncated) == (True, False)
-        assert np.array_equal(observation, [float(result.success), *unit])
+        assert np.array_equal(observation, np.array([float(result.success), *unit], dtype=np.float32))
         assert info["trial_id"] == request.trial_id == k and info["trial_seed"] == request.seed
         assert info["success"] == result.success and info["eta"] == result.quality
         assert info["metrics"] == result.metrics
@@ -152,6 +171,45 @@ def test_the_same_seed_gives_the_same_observations():
     assert [(o.tolist(), r, s) for o, r, s in first] == [(o.tolist(), r, s) for o, r, s in again]
     assert [s for _, _, s in run(6)] != [s for _, _, s in first]  # another run: other trial seeds
     env.close()
+
+
+@pytest.mark.parametrize("scenario", [WALKER, HUMANOID], ids=["walker", "humanoid"])
+def test_an_episode_depends_on_its_seed_alone_not_on_the_episodes_before(scenario):
+    """Whole first observations and trajectories of both doors: a fresh environment and one that ran other episodes
+    first (to their end, and cut short) give the same episode for the same seed. The humanoid's first frame used to
+    report the last episode's motor torques."""
+    rng = np.random.default_rng(0)
+
+    def tick_episode(env, seed, actions):
+        first, _ = env.reset(seed=seed)
+        return [first] + [env.step(a)[0] for a in actions]
+
+    fresh = sfl_gym.TickEnv(scenario)
+    actions = rng.uniform(fresh.action_space.low, fresh.action_space.high, (25, fresh.action_space.shape[0]))
+    expected = tick_episode(fresh, 7, actions)
+    used = sfl_gym.TickEnv(scenario)
+    used.reset(seed=1)
+    for a in rng.uniform(used.action_space.low, used.action_space.high, (60, used.action_space.shape[0])):
+        if used.step(a)[2]:
+            break
+    used.reset(seed=2)
+    used.step(actions[0])  # an episode cut short
+    got = tick_episode(used, 7, actions)
+    assert all(np.array_equal(a, b) for a, b in zip(expected, got, strict=True))
+    fresh.close()
+    used.close()
+    points = rng.random((2, fresh.plan.dim))
+    trials = sfl_gym.TrialEnv(scenario)
+    trials.reset(seed=3)
+    trials.step(points[0])
+    trials.reset(seed=9)
+    observation, reward, _, _, info = trials.step(points[1])
+    again = sfl_gym.TrialEnv(scenario)
+    again.reset(seed=9)
+    same = again.step(points[1])
+    assert np.array_equal(same[0], observation) and same[1] == reward and same[4]["metrics"] == info["metrics"]
+    trials.close()
+    again.close()
 
 
 def test_the_humanoids_start_depends_on_the_seed_and_on_nothing_else():
@@ -244,6 +302,70 @@ def test_bad_input_is_refused_naming_what_is_wrong():
         sfl_gym.TrialEnv(SCENARIOS / "analytic_conditions.yaml")
     with pytest.raises(ValueError, match=r"^TrialEnv: render_mode: expected None \(no render modes\); got 'human'$"):
         sfl_gym.TrialEnv(WALKER, render_mode="human")
+
+
+@pytest.mark.parametrize("asynchronous", [False, True], ids=["sync", "async"])
+def test_a_vector_of_trial_doors_runs_a_trial_in_every_env_on_every_step(asynchronous):
+    """``gymnasium.make_vec`` takes Trial-v0's vector entry point (SAME_STEP autoreset): 3 steps of 2 envs are 6
+    trials, each the trial a single env gives for its run seed (env i of reset(seed=s) runs the run seeded s + i),
+    no step a reset that runs nothing. ``asynchronous=True``: each env in a process of its own, the same trials."""
+    env = gym.make_vec(sfl_gym.TRIAL_ID, num_envs=2, scenario=str(WALKER), asynchronous=asynchronous)
+    assert env.metadata["autoreset_mode"] == gym.vector.AutoresetMode.SAME_STEP
+    points = np.array([[[0.5, 0.5], [0.9, 0.9]], [[0.2, 0.2], [0.5, 0.5]], [[0.6, 0.4], [0.3, 0.7]]])
+    env.reset(seed=11)
+    ran = []
+    for step in points:
+        _, reward, terminated, truncated, info = env.step(step.astype(np.float32))
+        assert terminated.all() and not truncated.any()
+        final = info["final_info"]
+        ran.append((final["trial_id"].tolist(), final["success"].tolist(), reward.tolist()))
+    env.close()
+    assert [ids for ids, _, _ in ran] == [[0, 0], [1, 1], [2, 2]]  # a trial per env per step
+    for i in range(2):
+        alone = sfl_gym.TrialEnv(WALKER)
+        for k, step in enumerate(points):
+            alone.reset(seed=11 + i if k == 0 else None)
+            _, reward, _, _, info = alone.step(step[i].astype(np.float32))
+            assert (info["success"], reward) == (ran[k][1][i], ran[k][2][i])
+        alone.close()
+    assert any(r > 0 for _, _, rewards in ran for r in rewards)
+
+
+def test_normalized_actions_and_observations_are_the_bodys_scaled():
+    """normalize=True is a linear map of the same episode: -1 is each command's low, 1 its high; each observation is
+    2 (x - low) / (high - low) - 1 of the sensor's declared range."""
+    plain, scaled = sfl_gym.TickEnv(WALKER), sfl_gym.TickEnv(WALKER, normalize=True)
+    low = np.array([c.low for c in plain.commands])
+    high = np.array([c.high for c in plain.commands])
+    sensor_low = np.array([c.low for c in plain.sensors])
+    sensor_high = np.array([c.high for c in plain.sensors])
+    first, _ = plain.reset(seed=0)
+    unit_first, _ = scaled.reset(seed=0)
+    rng = np.random.default_rng(1)
+    for a in rng.uniform(-1.0, 1.0, (30, 4)):
+        x, r, *_ = plain.step(low + (a + 1.0) / 2.0 * (high - low))
+        y, q, *_ = scaled.step(a)
+        sensed = plain.body.sense()
+        expected = (
+            2.0 * (np.clip(sensed, plain._sensor_low, plain._sensor_high) - sensor_low) / (sensor_high - sensor_low)
+            - 1.0
+        )
+        assert np.allclose(y, expected.astype(np.float32), atol=1e-6) and r == pytest.approx(q, abs=1e-12)
+    assert np.all(np.abs(y) <= 1.0 + 2.0 * SENSOR_SLACK)
+    plain.close()
+    scaled.close()
+
+
+def test_a_closed_environment_says_so():
+    for env in (gym.make(sfl_gym.TICK_ID, scenario=str(WALKER)), gym.make(sfl_gym.TRIAL_ID, scenario=str(WALKER))):
+        env.reset(seed=0)
+        env.close()
+        name = type(env.unwrapped).__name__
+        with pytest.raises(RuntimeError, match=rf"^{name}.step: the environment is closed; make a new one$"):
+            env.step(env.action_space.sample())
+        with pytest.raises(RuntimeError, match=rf"^{name}.reset: the environment is closed; make a new one$"):
+            env.reset()
+        env.close()  # again: nothing
 
 
 def test_a_non_finite_sensor_value_stops_the_episode_naming_the_sensor(monkeypatch):

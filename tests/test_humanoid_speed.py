@@ -46,6 +46,10 @@ class Reference(Humanoid):
         q, dq, _, tau = zip(*states, strict=True)
         self.q, self.dq, self.tau = np.array(q), np.array(dq), np.array(tau)
 
+    def _start_joints(self) -> None:  # a trial starts with no torque in both versions (issue 32)
+        self._read_joints()
+        self.tau = np.zeros(len(self.tau))
+
     def _foot_pressure(self) -> list[float]:
         c, robot = self.client, self.robot
         toe_x, heel_x = FSR_X

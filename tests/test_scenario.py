@@ -291,3 +291,32 @@ def test_sfl_list_prints_a_body_s_signal_table():
     assert "writes commands (with the default parameters): v_hip_l, v_hip_r" in done.stdout
     done = sfl("list", "planar_bipd")
     assert done.returncode == 2 and "did you mean `planar_biped`" in done.stderr and "Traceback" not in done.stderr
+
+
+@pytest.mark.parametrize(
+    ("setting", "says"),
+    [
+        ("protocol.proposer.kind=CMA", "got 'CMA' (did you mean `cma`?)"),  # case does not count
+        ("modules.vigilance.params.mode=FIXED", "got 'FIXED' (did you mean `fixed`?)"),
+        ("protocol.kind=Learn", "got 'Learn' (did you mean `learn`?)"),
+        ("modules.acc.params.neighbourhod=thesis", "(did you mean `neighbourhood`?)"),
+        (
+            "protocol.proposer.kind=null",
+            "protocol.proposer.kind: expected one of 'sfl', 'random', 'cma', 'tpe', 'safe_bo'; got null",
+        ),
+    ],
+)
+def test_suggestions_ignore_case_and_an_empty_value_reads_as_written(setting, says):
+    with pytest.raises(ScenarioError) as err:
+        load(SCENARIOS / "quickstart.yaml", [setting])
+    text = str(err.value)
+    assert says in text and "'None'" not in text
+
+
+def test_sfl_list_gives_a_bodys_metric_units():
+    done = sfl("list", "planar_biped")
+    assert done.returncode == 0, done.stderr
+    assert (
+        "trial metrics (m_<metric> columns): distance (m), velocity (m/s), steps, time (s), energy (J), fell"
+        in done.stdout
+    )

@@ -46,6 +46,9 @@ def test_tables_are_typed_and_hold_every_row(tmp_path):
     schema = pq.read_schema(out / "trials.parquet")
     assert schema.field("wall_ms").metadata[b"unit"] == b"ms"
     assert schema.field("x").metadata[b"meaning"] == b"body.x: physical value"
+    # a body metric carries the unit its body declares (Body.METRICS); the list column is typed as the file holds it
+    assert schema.field("m_distance_to_centre").metadata[b"unit"] == b"unit space"
+    assert str(schema.field("v_unit").type) == "list<element: double>"
     first = next(r for r in rows if r["kind"] == "trial")
     assert trials.iloc[0]["quality"] == first["quality"] and list(trials.iloc[0]["v_unit"]) == first["v_unit"]
     # the ACC's maps after every trial, and as the run left them (== acc.npz, which it checkpointed)

@@ -53,6 +53,7 @@ class CartPole(Body):
     )
     COMMANDS = (Signal("force", "N", -MAX_FORCE, MAX_FORCE, "horizontal push on the cart, clipped"),)
     TRIAL_PARAMS = ("tilt_deg",)
+    METRICS = {"time_up": "s", "rms_force": "N", "fell": "", "off_track": ""}  # outcome()'s metrics and their units
 
     @classmethod
     def check_trial_param(cls, name: str, value) -> None:
