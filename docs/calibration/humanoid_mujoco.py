@@ -86,7 +86,8 @@ def walks(physics: str, controller, controller_params: dict, seeds, noise: float
     if walked:
         lateral = max(abs(r.metrics["lateral"]) for r in walked)
         energy = [r.metrics["energy"] for r in walked]
-        out += f" in {min(times):.2f}-{max(times):.2f} s, lateral within {lateral:.2f} m, {min(energy):.0f}-{max(energy):.0f} J"
+        out += f" in {min(times):.2f}-{max(times):.2f} s, lateral within {lateral:.2f} m, "
+        out += f"{min(energy):.0f}-{max(energy):.0f} J"
     failed = [r for r in rows if not r.success]
     if failed:
         out += "; failed: " + ", ".join(
