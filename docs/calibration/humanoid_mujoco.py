@@ -7,7 +7,7 @@ besides are its contact model and the servo's clutches. Each line printed is a t
 
 - **standing** (5 s, every joint held at the standing pose): the load on the feet in the last second (mean +- s.d.,
   of the weight 50.97 N), the energy (5.6) spent holding the crouch, the torso's drift and how far its centre of mass
-  sank; PyBullet: 51.0 N +- 0, 3.8 J;
+  sank; PyBullet: 50.9 N +- 0.3, 3.8 J;
 - **open loop** (tests/test_humanoid.py's oscillator gait after CPG-HUMANOID.md §8, 3 seeds, start_noise 0.02): time
   to the 1.5-m line, lateral, energy; PyBullet 8.7-9.0 s;
 - **CPG** (the default gait of modules/cpg/circuits/humanoid_nao.yaml, unchanged, ``--walk N`` seeds, start_noise
@@ -24,8 +24,9 @@ to a rotor r turned at the speed target. Before it, the same law as a velocity a
 ``kv (target - dq)`` clipped to the cap, implicitfast): kv = servo_stiffness / servo_rate = 5 stood (51.0 N +- 0.2)
 but both gaits fell backward within 1.6 s (the servo too soft in motion: PyBullet's constraint spends up to the cap
 to reach the speed target, the actuator only kv per rad/s short of it); kv 10, 20, 50 made the standing robot chatter
-or fall (a capped actuator's force is explicit in MuJoCo, a relay between +-cap; 2026-11-27, measured with this
-script's standing trial). About 1 minute on 2 quiet cores.
+or fall (a capped actuator's force is explicit in MuJoCo, a relay between +-cap). Measured 2026-11-27 with this script's
+trials on that first version, which was never committed (the first commit has the clutch).
+About 1 minute on 2 quiet cores (--contact, --servo: 5 minutes).
 """
 
 from __future__ import annotations
