@@ -98,25 +98,34 @@ def test_standing_holds_and_the_feet_carry_the_weight():
     assert result.metrics["energy"] < 3.0  # holding the crouch (measured 2.0 J over 3 s; PyBullet 2.2 J)
 
 
-def test_the_cpg_gait_walks_and_the_same_request_gives_the_same_trial():
-    """The default CPG gait (humanoid_nao.yaml, unchanged) walks 1.5 m from two perturbed starts (measured over 10
-    starts: docs/bodies/humanoid.md); a trial run after others, after a world with a ball, and in a fresh body gives
-    the same metrics bit for bit."""
-    params = Humanoid.Params(physics="mujoco", duration=20.0, start_noise=0.02)
-    body = Humanoid(params)
+def test_the_cpg_gait_walks():
+    """The default CPG gait (humanoid_nao.yaml, unchanged) walks 1.5 m from two perturbed starts (over 10 starts per
+    alpha_MLR over processes: docs/bodies/humanoid.md, "Two engines")."""
+    body = Humanoid(Humanoid.Params(physics="mujoco", duration=20.0, start_noise=0.02))
     body.link = InProcessLink(CPGController(CPGParams(circuit="humanoid_nao")))
     results = [run(body, seed=seed, trial_id=seed) for seed in (0, 1)]
+    body.close()
     for result in results:
         m = result.metrics
         assert result.success and not m["fell"] and 10.0 < m["time"] < 16.0 and abs(m["lateral"]) < 0.3, m
         assert result.quality == pytest.approx(0.5 * TOTAL_MASS * (1.5 / m["time"]) ** 2 / m["energy"])
-    assert results[0].metrics != results[1].metrics
-    run(body, body_params={"ball_mass": 0.5, "ball_speed": 3.0, "ball_time": 0.5}, seed=7, trial_id=2)
+    assert results[0].metrics != results[1].metrics  # the seeds perturbed the starts
+
+
+def test_the_same_request_gives_the_same_trial_whatever_ran_before():
+    """A trial run after others, after a world with a ball, and in a fresh body: the same metrics bit for bit."""
+    params = Humanoid.Params(physics="mujoco", duration=2.0, start_noise=0.02)
+    body = Humanoid(params)
+    body.link = InProcessLink(CPGController(CPGParams(circuit="humanoid_nao")))
+    first = run(body, seed=0, trial_id=0)
+    run(body, seed=1, trial_id=1)
+    ball = run(body, body_params={"ball_mass": 0.5, "ball_speed": 3.0, "ball_time": 0.5}, seed=7, trial_id=2)
+    assert ball.metrics["ball_impulse"] > 0  # the ball hit the robot
     again = run(body, seed=0, trial_id=3)
     body.close()
     fresh = Humanoid(params)
     fresh.link = InProcessLink(CPGController(CPGParams(circuit="humanoid_nao")))
-    assert again.metrics == run(fresh, seed=0, trial_id=0).metrics == results[0].metrics
+    assert again.metrics == run(fresh, seed=0, trial_id=0).metrics == first.metrics
     fresh.close()
 
 
@@ -144,25 +153,23 @@ def test_a_missing_mujoco_is_a_clear_error_naming_the_extra_and_the_core_never_i
             sys.modules["mujoco"] = saved
 
 
-def test_sfl_run_with_physics_mujoco_walks_records_and_matches_one_process(tmp_path):
-    """scenarios/humanoid_walk.yaml with ``physics: mujoco`` over processes: completed, every alpha_MLR walks the
-    1.5 m, the recording holds the robot's boxes, and the records are the ones the same scenario gives in one
-    process."""
+def test_sfl_run_with_physics_mujoco_records_and_matches_one_process(tmp_path):
+    """scenarios/humanoid_walk.yaml with ``physics: mujoco`` and 3-s trials, over processes: completed, the recording
+    holds the robot's boxes, and the records are the ones the same scenario gives in one process."""
+    sets = [MUJOCO, "modules.body.params.duration=3.0"]
     out = tmp_path / "run"
-    done = sfl_run(SCENARIOS / "humanoid_walk.yaml", out, MUJOCO)
+    done = sfl_run(SCENARIOS / "humanoid_walk.yaml", out, *sets)
     assert done.returncode == 0, done.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "completed" and summary["trials"] == 3
     rows = read_records(out)
     trials = [r for r in rows if r["kind"] == "trial"]
-    for r in trials:
-        assert r["success"] and r["quality"] > 0 and not r["m_fell"], r
-    assert trials[0]["m_time"] > trials[1]["m_time"] > trials[2]["m_time"]  # a larger alpha_MLR walks faster
+    assert all(r["m_timed_out"] and r["m_distance"] > 0.1 for r in trials), trials  # walking when the time ran out
     boxes = 0
     for chunk in RrdReader(out / "recording.rrd").stream().to_chunks():
         if str(chunk.entity_path) == "/body/robot" and not chunk.is_static:
             boxes += chunk.num_rows
-    assert boxes >= 3 * 25 * 10  # 25 pictures per simulated second, 10 s and more per trial
-    local = run_local(load(SCENARIOS / "humanoid_walk.yaml", [MUJOCO]))
+    assert boxes >= 3 * 25 * 3  # 25 pictures per simulated second, 3 s per trial
+    local = run_local(load(SCENARIOS / "humanoid_walk.yaml", sets))
     stable = [{k: v for k, v in r.items() if k != "wall_ms"} for r in rows]
     assert [{k: v for k, v in r.items() if k != "wall_ms"} for r in local] == stable
