@@ -297,10 +297,15 @@ class MujocoWorld:
         d = self.data
         return [(tuple(d.xpos[b].tolist()), _wxyz_to_xyzw(d.xquat[b])) for b in self.link_body]
 
+    def set_ball_mass(self, mass: float) -> None:
+        """The ball's mass (kg) and a solid sphere's inertia."""
+        self.model.body_mass[self.ball] = mass
+        self.model.body_inertia[self.ball] = 0.4 * mass * BALL_RADIUS**2
+
     def throw(self, position, velocity, mass: float) -> None:
-        m, d = self.model, self.data
-        m.body_mass[self.ball] = mass
-        m.body_inertia[self.ball] = 0.4 * mass * BALL_RADIUS**2
+        """The ball, of ``mass`` kg, at ``position`` with ``velocity`` (world frame), not spinning."""
+        d = self.data
+        self.set_ball_mass(mass)
         a, v = self.ball_qpos, self.ball_qvel
         d.qpos[a : a + 3] = position
         d.qpos[a + 3 : a + 7] = (1.0, 0.0, 0.0, 0.0)
@@ -351,6 +356,8 @@ class HumanoidMujoco(Humanoid):
         world = self.world = self._worlds[key]
         self.ground_x, self.ground_z, self.ground_boxes, self._start_pose, self.start_height = world.ground
         world.reset(world.start)
+        if world.ball is not None:  # this trial's ball from the start, as PyBullet's body sets it
+            world.set_ball_mass(self.ball_mass)
         start_noise = float(body_params.get("start_noise", p.start_noise))  # a trial may set its own
         if start_noise > 0:
             offsets = np.random.default_rng(request.seed).normal(0.0, start_noise, N)

@@ -113,15 +113,19 @@ def test_the_cpg_gait_walks():
 
 
 def test_the_same_request_gives_the_same_trial_whatever_ran_before():
-    """A trial run after others, after a world with a ball, and in a fresh body: the same metrics bit for bit."""
+    """A trial run after others, after a world with a ball, and in a fresh body, and a ball trial after one with
+    another ball: the same metrics bit for bit."""
     params = Humanoid.Params(physics="mujoco", duration=2.0, start_noise=0.02)
     body = Humanoid(params)
     body.link = InProcessLink(CPGController(CPGParams(circuit="humanoid_nao")))
     first = run(body, seed=0, trial_id=0)
     run(body, seed=1, trial_id=1)
-    ball = run(body, body_params={"ball_mass": 0.5, "ball_speed": 3.0, "ball_time": 0.5}, seed=7, trial_id=2)
+    throw = {"ball_mass": 0.5, "ball_speed": 3.0, "ball_time": 0.5}
+    ball = run(body, body_params=throw, seed=7, trial_id=2)
     assert ball.metrics["ball_impulse"] > 0  # the ball hit the robot
-    again = run(body, seed=0, trial_id=3)
+    run(body, body_params={**throw, "ball_mass": 2.0}, seed=7, trial_id=3)  # a heavier ball in the same world
+    assert run(body, body_params=throw, seed=7, trial_id=4).metrics == ball.metrics
+    again = run(body, seed=0, trial_id=5)
     body.close()
     fresh = Humanoid(params)
     fresh.link = InProcessLink(CPGController(CPGParams(circuit="humanoid_nao")))
