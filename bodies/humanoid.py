@@ -60,7 +60,7 @@ import tempfile
 from typing import ClassVar, Literal
 
 import numpy as np
-from pydantic import Field, field_validator
+from pydantic import Field, field_validator, model_validator
 
 from sfl_brain.bodies.humanoid_table import (
     FSR_X,
@@ -176,12 +176,15 @@ def link_inertial(link: str) -> tuple[float, np.ndarray, np.ndarray]:
     return mass, com, inertia
 
 
-def urdf_text() -> str:
-    """The humanoid's URDF, generated from the table (collision boxes only: DIRECT mode draws nothing)."""
+def urdf_text(mass_scale: float = 1.0) -> str:
+    """The humanoid's URDF, generated from the table (collision boxes only: DIRECT mode draws nothing); every link's
+    mass and inertia times ``mass_scale`` (1: the table's; the same shapes and centres of mass)."""
     xyz = " ".join  # a URDF triple
     out = ['<?xml version="1.0"?>', '<robot name="nao_v40_boxes">']
     for link in LINKS:
         mass, com, i = link_inertial(link)
+        if mass_scale != 1.0:
+            mass, i = mass * mass_scale, i * mass_scale
         out.append(f'  <link name="{link}">')
         out.append(
             f'    <inertial><origin xyz="{xyz(map(repr, com.tolist()))}"/><mass value="{mass!r}"/>'
@@ -205,9 +208,9 @@ def urdf_text() -> str:
     return "\n".join(out) + "\n"
 
 
-def urdf_path() -> str:
+def urdf_path(mass_scale: float = 1.0) -> str:
     """The generated URDF in the temp directory, named by its content's hash (written once, atomically)."""
-    text = urdf_text()
+    text = urdf_text(mass_scale)
     path = os.path.join(tempfile.gettempdir(), f"sfl_humanoid_{hashlib.sha1(text.encode()).hexdigest()[:12]}.urdf")
     if not os.path.exists(path):
         fd, tmp = tempfile.mkstemp(suffix=".urdf", dir=os.path.dirname(path))
@@ -266,6 +269,13 @@ class HumanoidParams(BodyParams):
     run_up: float = Field(1.0, gt=0, le=100, description="m of ground behind the start, along the first piece")
     run_out: float = Field(20.0, gt=0, le=1000, description="m of ground after the last piece")
     ground_width: float = Field(2.0, gt=0, le=1000, description="m: the ground's width (the lane is +-0.5 m)")
+    total_mass: float | None = Field(
+        None,
+        gt=1.0,
+        le=20.0,
+        description="kg: every link's mass (and inertia) scaled so that the robot weighs this; none: the table's "
+        f"{TOTAL_MASS:.3f} kg (NAO V4.0). The thesis's robot weighs 4.3 kg (L1430; issue 29's E4.7 at 4.3 kg)",
+    )
     physics: Literal["pybullet", "mujoco"] = Field("pybullet", description="physics engine (mujoco: an extra, 31)")
 
     @field_validator("physics")
@@ -279,6 +289,12 @@ class HumanoidParams(BodyParams):
             except ImportError as exc:
                 raise ValueError(str(exc)) from None
         return physics
+
+    @model_validator(mode="after")
+    def _mass_on_pybullet(self) -> "HumanoidParams":  # the MJCF has the table's masses only (issue 31)
+        if self.physics == "mujoco" and self.total_mass is not None:
+            raise ValueError("total_mass is PyBullet's only for now: with physics: mujoco leave it out (none)")
+        return self
 
 
 class Humanoid(Body):
@@ -299,6 +315,11 @@ class Humanoid(Body):
 
     def __init__(self, params: HumanoidParams | None = None, *, seed: int = 0) -> None:
         super().__init__(params, seed=seed)
+        total = self.params.total_mass
+        self.mass_scale = 1.0 if total is None else total / TOTAL_MASS  # every link's mass x this
+        self.mass = TOTAL_MASS * self.mass_scale  # kg: m of (5.7)
+        self._next_piece: float | None = None  # x (m) where the ground changes first (a trial's terrain)
+        self.terrain_reached = -1.0
         self.client: int | None = None  # PyBullet's, made by the first trial
         self._world_key = None  # (terrain, ball or not) of the world built and saved
         self._saved: int | None = None
@@ -347,6 +368,10 @@ class Humanoid(Body):
         self.ball_impulse = self.ball_peak = 0.0
         self._ball_thrown = False
         pieces = self._pieces(body_params)
+        # where the ground changes first (x, m), watched for the metric terrain_reached: None on one piece of ground
+        self._next_piece = pieces[0][0] * math.cos(pieces[0][1]) if len(pieces) > 1 else None
+        self._next_slope = math.degrees(pieces[1][1]) if len(pieces) > 1 else None
+        self.terrain_reached = -1.0  # s: when a foot first touched the next piece of ground (-1: not yet, or none)
         if self.client is None:
             self.client = pb.connect(pb.DIRECT)
         # a world with a ball is another world: trials without one keep theirs, bit for bit
@@ -398,7 +423,7 @@ class Humanoid(Body):
         )
         pb.setGravity(0.0, 0.0, -G, physicsClientId=c)
         self._build_ground(pieces)
-        self.robot = pb.loadURDF(urdf_path(), flags=pb.URDF_USE_INERTIA_FROM_FILE, physicsClientId=c)
+        self.robot = pb.loadURDF(urdf_path(self.mass_scale), flags=pb.URDF_USE_INERTIA_FROM_FILE, physicsClientId=c)
         names = {pb.getJointInfo(self.robot, i, physicsClientId=c)[1].decode(): i for i in range(N)}
         self.joint_index = [names[name] for name in JOINT_NAMES]
         self.link_index = {"torso": -1} | {j.child: names[j.name] for j in JOINTS}  # a link's index = its joint's
@@ -528,6 +553,10 @@ class Humanoid(Body):
         contacts = pb.getContactPoints(bodyA=robot, physicsClientId=c)
         if not contacts:
             return fsr
+        if self._next_piece is not None and self.terrain_reached < 0:  # the ground truth of issue 29's detectors
+            edge = self._next_piece
+            if any(contact[5][0] >= edge for contact in contacts if contact[3] in self.foot_index):
+                self.terrain_reached = self.t
         feet = self.foot_index
         states = pb.getLinkStates(robot, feet, physicsClientId=c)  # both feet's frames in one call
         for k, (foot, state) in enumerate(zip(feet, states, strict=True)):
@@ -687,7 +716,7 @@ class Humanoid(Body):
         distance = float(self.torso_position[0])
         success = self.finished
         # (5.7)-(5.8): E_k = m v_a^2 / 2 with v_a = trajectory length / time; eta = E_k / E_e
-        eta = walking_efficiency(TOTAL_MASS, p.finish_line / self.finish_time, self.energy) if success else 0.0
+        eta = walking_efficiency(self.mass, p.finish_line / self.finish_time, self.energy) if success else 0.0
         metrics = {
             "distance": distance,
             "lateral": float(self.torso_position[1]),
@@ -701,6 +730,8 @@ class Humanoid(Body):
         }
         if self.ball_mass > 0:
             metrics |= {"ball_impulse": self.ball_impulse, "ball_peak_force": self.ball_peak}
+        if self._next_piece is not None:  # s: when a foot first touched the next piece of ground (-1: never)
+            metrics["terrain_reached"] = self.terrain_reached
         return success, eta, metrics
 
     # ------------------------------------------------------------------ telemetry
@@ -771,6 +802,10 @@ class Humanoid(Body):
             else:
                 what = f"push {self.push_force:g} N for {self.push_end - self.push_start:g} s"
             emit(Event("events", trial_id, t0 + pushes[0][0], what))
+        if self._next_piece is not None and self.terrain_reached >= 0:
+            where = f"{self._next_slope:g} deg from x = {self._next_piece:.2f} m"
+            what = f"a foot reaches the next piece of ground ({where})"
+            emit(Event("events/terrain", trial_id, t0 + self.terrain_reached, what))
 
     def _log_pictures(self, trial_id: int, t0: float) -> None:
         frames = self._frames

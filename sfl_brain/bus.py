@@ -37,11 +37,16 @@ import zenoh
 
 from .status import EnvironmentProblem
 
-#: keep-alive lease: a silent peer is declared gone after this many ms. A module whose process exits is seen at
-#: once (its exit, its closed sockets); the lease only finds one that hangs, or a worker on another machine. 1 s
-#: was too short on a loaded machine: a module that had just started on a core shared with a run's busy loop
-#: (one core per test worker, thousands of ACC decisions) lost its link and was killed as silent.
+#: keep-alive lease of a process on another machine (``sfl worker``; ``timeouts.lease``, in ms): its peers declare it
+#: gone after this long without a word from it. A session declares its own lease, and its peers judge it by it.
 LEASE_MS = 3000
+
+#: the lease of every process of a run on its own machine (the supervisor and its module processes): a day. A
+#: process that exits is seen at once (its closed sockets, its exit), so the lease would only catch one that is
+#: stopped, starved or hung, and those are told apart by their progress and CPU (:mod:`sfl_brain.liveness`), not by
+#: silence. With a lease of seconds, a module stopped (SIGSTOP) or starved for longer lost every link and every
+#: request in flight, and on resuming dropped its own links to peers it had not heard from meanwhile (issue 34).
+LOCAL_LEASE_MS = 24 * 3600 * 1000
 
 #: Zenoh's async runtimes (``ZENOH_RUNTIME``, RON): all handed over to the transmit runtime's one
 #: worker thread, instead of 2 receive workers and a thread each for transmit, accept, network and
@@ -118,8 +123,10 @@ def config(
     connect: list[str] | None = None,
     *,
     zenoh_config: str | Path | None = None,
+    lease_ms: int = LEASE_MS,
 ) -> zenoh.Config:
-    """A peer configuration: loopback, multicast scouting off, short lease.
+    """A peer configuration: loopback, multicast scouting off, this session's lease (ms: how long its peers wait
+    for a word from it).
 
     ``zenoh_config`` (a JSON5 file: TLS, user/password, ...) is loaded first and our settings go
     on top of it."""
@@ -128,7 +135,7 @@ def config(
     conf.insert_json5("listen/endpoints", json.dumps(listen if listen is not None else ["tcp/127.0.0.1:0"]))
     conf.insert_json5("connect/endpoints", json.dumps(connect or []))
     conf.insert_json5("scouting/multicast/enabled", "false")
-    conf.insert_json5("transport/link/tx/lease", str(LEASE_MS))
+    conf.insert_json5("transport/link/tx/lease", str(int(lease_ms)))
     conf.insert_json5("transport/link/tx/keep_alive", "4")
     return conf
 
@@ -139,7 +146,7 @@ def tick_endpoint(folder: str | Path, pair: str) -> str:
     return f"unixsock-stream/{Path(folder) / pair}.sock"
 
 
-def tick_config(listen: list[str], connect: list[str]) -> zenoh.Config:
+def tick_config(listen: list[str], connect: list[str], lease_ms: int = LOCAL_LEASE_MS) -> zenoh.Config:
     """The configuration of a lockstep link (see :func:`open_tick_session`)."""
     conf = zenoh.Config()
     conf.insert_json5("mode", '"peer"')
@@ -151,12 +158,12 @@ def tick_config(listen: list[str], connect: list[str]) -> zenoh.Config:
     conf.insert_json5("connect/retry", json.dumps(TICK_RETRY))
     conf.insert_json5("transport/unicast/lowlatency", "true")
     conf.insert_json5("transport/unicast/qos/enabled", "false")  # lowlatency needs QoS off, at both ends
-    conf.insert_json5("transport/link/tx/lease", str(LEASE_MS))
+    conf.insert_json5("transport/link/tx/lease", str(int(lease_ms)))
     conf.insert_json5("transport/link/tx/keep_alive", "4")
     return conf
 
 
-def open_tick_session(listen: list[str], connect: list[str]) -> zenoh.Session:
+def open_tick_session(listen: list[str], connect: list[str], lease_ms: int = LOCAL_LEASE_MS) -> zenoh.Session:
     """A lockstep link: a Zenoh session of its own between a body worker and its controller process,
     carrying only their per-tick frames and commands.
 
@@ -169,7 +176,7 @@ def open_tick_session(listen: list[str], connect: list[str]) -> zenoh.Session:
     only this user may enter (``tick_endpoint``); the body's end connects (and connects again within
     :data:`TICK_RETRY` after a restart). No gossip: the link is never part of the mesh."""
     os.environ.setdefault("ZENOH_RUNTIME", RUNTIME)
-    return zenoh.open(tick_config(listen, connect))
+    return zenoh.open(tick_config(listen, connect, lease_ms))
 
 
 def open_session(
@@ -177,8 +184,10 @@ def open_session(
     connect: list[str] | None = None,
     *,
     zenoh_config: str | Path | None = None,
+    lease_ms: int = LEASE_MS,
 ) -> zenoh.Session:
-    """Open a peer session (loopback, no multicast scouting), with the user's Zenoh config under ours.
+    """Open a peer session (loopback, no multicast scouting), with the user's Zenoh config under ours; ``lease_ms``:
+    how long its peers wait for a word from it (:data:`LOCAL_LEASE_MS` for the processes of a run on its machine).
 
     The run secret is not used as a Zenoh transport password: with ``transport/auth/usrpwd``, peers
     that find each other by gossip and connect both ways are refused (``Close(INVALID)``, zenoh issue
@@ -188,7 +197,7 @@ def open_session(
     user's, through ``zenoh_config`` (``docs/reliability.md``)."""
     # read once per process, when Zenoh starts its runtimes (the first session): set it before that
     os.environ.setdefault("ZENOH_RUNTIME", RUNTIME)
-    return zenoh.open(config(listen, connect, zenoh_config=zenoh_config))
+    return zenoh.open(config(listen, connect, zenoh_config=zenoh_config, lease_ms=lease_ms))
 
 
 def new_secret() -> str:

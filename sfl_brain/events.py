@@ -25,9 +25,38 @@ class ModuleAlive:
 
 @dataclass(frozen=True)
 class ModuleSilent:
-    """A module's liveliness lease expired while its process runs: the supervisor kills it."""
+    """A module process lost its link to the run (its liveliness token went away) while it still runs: the supervisor
+    waits for it to come back, and judges it by its progress (:class:`ModuleHung`), not by the silence."""
 
     name: str
+
+
+@dataclass(frozen=True)
+class ModuleStopped:
+    """A module process the run waits on is stopped (SIGSTOP, Ctrl-Z, a debugger, a suspended machine): the run waits
+    for it to continue (``stopped`` False once it runs again)."""
+
+    name: str
+    stopped: bool = True
+
+
+@dataclass(frozen=True)
+class ModuleHung:
+    """A module process had the CPU for ``seconds`` without progress while the run waited on it (``doing``), past its
+    time (``limit`` s, the scenario key ``key``): it is hung (:mod:`sfl_brain.liveness`). A body worker or controller
+    is killed and restarted by its policy; a brain module fails the run."""
+
+    name: str
+    seconds: float
+    key: str
+    limit: float
+    doing: str
+
+    def describe(self) -> str:
+        return (
+            f"module `{self.name}` is hung: for {self.seconds:.1f} s it could run (neither stopped nor waiting for a "
+            f"core) and did not finish {self.doing} ({self.key} is {self.limit:g} s)"
+        )
 
 
 @dataclass(frozen=True)
@@ -41,24 +70,38 @@ class ModuleDied:
     #: the last lines of its log, indented
     log_tail: str
     before_ready: bool = False
+    #: why it died when the supervisor ended it (``hung: ...``), else ''
+    cause: str = ""
 
     def describe(self) -> str:
         """The run's stop reason when nothing replaces the module."""
         when = " before it was ready" if self.before_ready else ""
+        why = f" ({self.cause}: killed)" if self.cause else ""
         return (
-            f"module `{self.name}` ({self.reference}) died with exit code {self.exit_code}{when}; "
+            f"module `{self.name}` ({self.reference}) died with exit code {self.exit_code}{when}{why}; "
             f"its log ({self.log_path}):\n{self.log_tail}"
         )
 
 
 @dataclass(frozen=True)
 class Restarted:
-    """A module process that died was started again by its restart policy (``restart``-th of ``max_restarts``)."""
+    """A module process that died (or was ended as hung: ``cause``) was started again by its restart policy
+    (``restart``-th of ``max_restarts``)."""
 
     name: str
     exit_code: int
     restart: int
     max_restarts: int
+    cause: str = ""
+
+
+@dataclass(frozen=True)
+class PlacementYielded:
+    """``pin_cpus: auto``: other work came to keep a pair's core busy (``busy``: which, how much), so the run's
+    processes were placed again (``placement``: the new placement's line)."""
+
+    busy: str
+    placement: str
 
 
 @dataclass(frozen=True)

@@ -37,13 +37,15 @@ import sys
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import zenoh
 
 from . import bus, ticklink
-from .body import Body, InProcessLink
+from .body import Body, Controller, InProcessLink
+from .liveness import NoProgressClock, ProgressSlot, cpu_sample
 from .messages import (
     ControllerReset,
     Message,
@@ -68,6 +70,17 @@ _decode_command = decoder_for(MotorCommand)
 
 class LinkError(RuntimeError):
     """The controller did not answer during a trial (it died or hung): the trial is interrupted."""
+
+
+class ControllerHung(LinkError):
+    """The controller process had the CPU for ``timeouts.tick`` seconds without answering a tick or a reset
+    (:mod:`sfl_brain.liveness`): it is hung. The trial is interrupted, and the supervisor ends the controller (it is
+    restarted by its policy)."""
+
+
+#: how long a body waits for its controller's reset reply when it can watch the controller's process: as long as
+#: the controller lives and is not hung (its watchdog decides); the query itself only ends with the process
+WATCHED_WAIT = 24 * 3600.0
 
 
 class SpinThenSleep:
@@ -143,8 +156,11 @@ STOPPING = "the body worker is stopping"
 class TickLink:
     """What a body's link to its controller in another process does on either transport (:class:`SocketLink`,
     :class:`BusLink`): the reset, a signed request on the mesh whose nonce becomes the trial's stream nonce;
-    a watchdog that ends a tick whose command is overdue after ``timeout`` seconds (a hung controller);
-    :meth:`interrupt` when the host stops. A body that may use one core only (a 1-core machine, or sharing
+    a watchdog that ends a tick (or a reset) whose answer is overdue (:class:`ControllerHung`); :meth:`interrupt`
+    when the host stops. With ``controller_pid`` (the controller's process, from the run's progress board) overdue
+    means the controller had the CPU for ``timeout`` seconds and did not answer: a controller that is starved,
+    niced or stopped (SIGSTOP, a suspended laptop) is waited for (:mod:`sfl_brain.liveness`); without it (a host
+    started by hand) ``timeout`` seconds of wall time. A body that may use one core only (a 1-core machine, or sharing
     its core with its controller, ``lockstep.pin_cpus``) never polls: polling needs a core for the
     controller to answer on, or it starves the controller it waits for."""
 
@@ -158,18 +174,25 @@ class TickLink:
         spin: float,
         secret: str | None,
         drops: bus.Drops | None,
+        controller_pid: Callable[[], int] | None = None,
+        progress: Callable[[], None] | None = None,
     ) -> None:
         self.session = session
         self.run_id = run_id
         self.controller = controller
         self.timeout = timeout
+        #: the controller's current process id (0 while unknown), or None: judge it by the wall clock
+        self.controller_pid = controller_pid
+        #: counts a tick on the run's progress board
+        self.progress = progress or (lambda: None)
         self.seal = bus.Seal(secret)
         self.drops = drops or bus.Drops(log, body)
         self.waiter = SpinThenSleep(spin if len(usable_cpus()) > 1 else 0.0)
         self.reset_key = bus.key(run_id, controller, ControllerReset.TAG)
         self.nonce = b""  # this trial's stream nonce (set by reset)
-        self._waiting_since: float | None = None
+        self._waiting_since: float | None = None  # a tick's or the reset's wait for the controller, since
         self._abort: str | None = None  # why the waiting tick must end (overdue command, stopping)
+        self._abort_as: type[LinkError] = LinkError
         self._stopping = False
         self._closed = threading.Event()
 
@@ -177,36 +200,108 @@ class TickLink:
         threading.Thread(target=self._watch, name="ticklink-watchdog", daemon=True).start()
 
     def _wake(self, reason: str) -> None:
-        """End the waiting tick with LinkError(reason, ``{tick}`` filled in)."""
+        """End the waiting tick (or reset) with :meth:`_fault` (``reason`` with ``{what}`` filled in)."""
         raise NotImplementedError
 
+    def _fault(self, what: str) -> LinkError:
+        """The error that ends the wait for ``what`` (``tick 12``, ``the reset of trial 3``): why the watchdog or a
+        stop ended it (:class:`ControllerHung` for a hung controller)."""
+        return self._abort_as("interrupted: " + (self._abort or "").format(what=what))
+
     def _watch(self) -> None:
+        """Every ``timeout / 4`` s (at most 1 s): end a wait for the controller that is overdue (see the class)."""
         period = min(max(self.timeout / 4, 0.01), 1.0)
+        clock, watching = NoProgressClock(), None
         while not self._closed.wait(period):
             since = self._waiting_since
-            if since is not None and time.perf_counter() - since > self.timeout and self._abort is None:
-                self._wake(f"no command for tick {{tick}} within {self.timeout:g} s")
+            if since is None or self._abort is not None:
+                watching = None
+                continue
+            if since != watching:  # another wait: a clock of its own
+                watching = since
+                clock.reset()
+            pid = self.controller_pid() if self.controller_pid is not None else None
+            if pid is None:  # nothing to watch: the wall clock
+                if time.perf_counter() - since > self.timeout and self._abort is None:
+                    self._abort_as = ControllerHung
+                    self._wake(f"no answer to {{what}} within {self.timeout:g} s")
+                continue
+            had = clock.update([cpu_sample(pid)] if pid else [None], since)
+            if had > self.timeout and self._abort is None and self._waiting_since == since:
+                self._abort_as = ControllerHung
+                self._wake(
+                    f"the controller `{self.controller}` (pid {pid}) could run for {had:.1f} s and did not answer "
+                    f"{{what}} (timeouts.tick {self.timeout:g} s): hung"
+                )
 
     def interrupt(self) -> None:
         """Make a waiting (or the next) tick raise LinkError: the host is stopping."""
         self._stopping = True
+        self._abort_as = LinkError
         self._wake(STOPPING)
 
     def reset(self, msg: ControllerReset) -> None:
-        """A new trial: drop what an earlier one left on the link, send the reset (a signed request whose nonce is
-        the new trial's stream nonce), and wait for the link to be up (a restarted controller's comes up with its
-        process), within ``timeout``."""
+        """A new trial: drop what an earlier one left on the link, wait for the link to be up (a restarted
+        controller's comes up with its process, within ``timeout``), then send the reset (a signed request whose
+        nonce is the new trial's stream nonce) and wait for its reply as for a tick's command (the watchdog)."""
         if self._stopping:
             raise LinkError(f"interrupted: {STOPPING}")
         self._drop_stale()
         self.waiter.restart()
         self.nonce = os.urandom(bus.Seal.NONCE)
-        try:
-            request(self.session, self.reset_key, msg, self.timeout, seal=self.seal, nonce=self.nonce)
-        except NoReply as exc:  # a late controller interrupts the trial (it is retried); its errors do not
-            raise LinkError(f"controller reset for trial {msg.trial_id}: {exc}") from None
         if not self._link_up():
             raise LinkError(f"trial {msg.trial_id}: no lockstep link to `{self.controller}` within {self.timeout:g} s")
+        self._abort, self._abort_as = None, LinkError
+        watched = self.controller_pid is not None
+        self._waiting_since = time.perf_counter()
+        try:
+            self._ask_reset(msg, WATCHED_WAIT if watched else self.timeout)
+        finally:
+            self._waiting_since = None
+
+    def _ask_reset(self, msg: ControllerReset, wait: float) -> None:
+        """Send the signed reset and wait for its reply, until the watchdog ends the wait, the controller answers
+        (an error reply raises :class:`RemoteError`), or the query ends unanswered (the controller went away)."""
+        nonce, payload = self.seal.seal_request(self.reset_key, encode(msg), self.nonce)
+        replies: queue.SimpleQueue = queue.SimpleQueue()
+        seal = self.seal
+
+        def on_reply(reply: zenoh.Reply) -> None:  # in Zenoh's thread: only opens and hands over
+            if reply.ok is not None:
+                data = seal.open_reply(nonce, reply.ok.payload.to_bytes())
+                if data is not None:
+                    replies.put((True, data))
+            else:
+                text = seal.open_reply(nonce, reply.err.payload.to_bytes())
+                if text is not None:  # not Zenoh's own "Timeout", nor a stranger's
+                    replies.put((False, text))
+
+        sent = time.monotonic()
+        self.session.get(
+            self.reset_key,
+            zenoh.handlers.Callback(on_reply, lambda: replies.put(None), indirect=False),
+            payload=payload,
+            timeout=wait,
+            target=zenoh.QueryTarget.ALL,
+            consolidation=zenoh.ConsolidationMode.NONE,  # every reply as it comes: a stranger's cannot hold ours
+        )
+        while True:
+            try:
+                answer = replies.get(timeout=0.05)
+            except queue.Empty:
+                if self._abort is not None:
+                    raise self._fault(f"the reset of trial {msg.trial_id}") from None
+                continue
+            if answer is None:
+                waited = time.monotonic() - sent
+                raise LinkError(
+                    f"controller reset for trial {msg.trial_id}: no reply from {self.reset_key} after {waited:.2f} s"
+                )
+            ok, data = answer
+            if ok:
+                decode(data)
+                return
+            raise RemoteError(data.decode(errors="replace"))
 
     def _drop_stale(self) -> None:
         """Drop the commands (and wake-ups) an interrupted trial left on the link."""
@@ -251,8 +346,10 @@ class BusLink(TickLink):
         secret: str | None = None,
         drops: bus.Drops | None = None,
         ticks: zenoh.Session | None = None,
+        controller_pid: Callable[[], int] | None = None,
+        progress: Callable[[], None] | None = None,
     ) -> None:
-        super().__init__(session, run_id, body, controller, timeout, spin, secret, drops)
+        super().__init__(session, run_id, body, controller, timeout, spin, secret, drops, controller_pid, progress)
         self.ticks = ticks or session
         self.command_key = bus.key(run_id, body, MotorCommand.TAG)
         self.publisher = self.ticks.declare_publisher(bus.key(run_id, controller, SensorFrame.TAG))
@@ -285,13 +382,13 @@ class BusLink(TickLink):
         elif key_expr in self._controller_tokens:
             self._controller_tokens.discard(key_expr)
             if self._waiting_since is not None and self._abort is None:
-                self._wake(f"the controller `{self.controller}` went away at tick {{tick}}")
+                self._wake(f"the controller `{self.controller}` went away at {{what}}")
 
     def _on_matching(self, status: zenoh.MatchingStatus) -> None:
         (self._linked.set if status.matching else self._linked.clear)()
 
     def _wake(self, reason: str) -> None:
-        """End the waiting tick with LinkError(reason, ``{tick}`` filled in); an empty payload wakes recv()."""
+        """End the waiting tick as :meth:`TickLink._wake`; an empty payload wakes recv()."""
         self._abort = reason
         if not self._closed.is_set():
             try:
@@ -309,7 +406,7 @@ class BusLink(TickLink):
     def step(self, frame: SensorFrame) -> MotorCommand:
         clock = time.perf_counter
         if not self._stopping:
-            self._abort = None
+            self._abort, self._abort_as = None, LinkError
         nonce = self.nonce
         self.publisher.put(encode(frame) + nonce)
         # the bookkeeping runs while the controller works on the frame, not before it is sent
@@ -326,11 +423,12 @@ class BusLink(TickLink):
                     spin = False  # after a wake-up or a dropped message: sleep
                 data = (sample if sample is not None else subscriber.recv()).payload.to_bytes()
                 if self._abort is not None:
-                    raise LinkError("interrupted: " + self._abort.format(tick=frame.tick))
+                    raise self._fault(f"tick {frame.tick}")
                 if not data:
                     continue  # a late wake-up from an earlier tick
                 command = check_command(data, frame, nonce, self.drops)
                 if command is not None:
+                    self.progress()
                     return command
         finally:
             self._waiting_since = None
@@ -366,8 +464,10 @@ class SocketLink(TickLink):
         endpoint: str,
         secret: str | None = None,
         drops: bus.Drops | None = None,
+        controller_pid: Callable[[], int] | None = None,
+        progress: Callable[[], None] | None = None,
     ) -> None:
-        super().__init__(session, run_id, body, controller, timeout, spin, secret, drops)
+        super().__init__(session, run_id, body, controller, timeout, spin, secret, drops, controller_pid, progress)
         self.channel = ticklink.Channel(endpoint)
         self._start_watchdog()
 
@@ -385,7 +485,7 @@ class SocketLink(TickLink):
         clock, channel = time.perf_counter, self.channel
         if self._stopping:  # interrupt() sets it before it wakes: a wake that found no socket is not lost
             raise LinkError(f"interrupted: {STOPPING}")
-        self._abort = None
+        self._abort, self._abort_as = None, LinkError
         nonce = self.nonce
         try:
             channel.send(encode(frame) + nonce)
@@ -405,10 +505,13 @@ class SocketLink(TickLink):
                     continue
                 command = check_command(data, frame, nonce, self.drops)
                 if command is not None:
+                    self.progress()
                     return command
         except ticklink.LinkClosed:
-            why = self._abort or f"the lockstep link to `{self.controller}` closed at tick {{tick}} (it went away)"
-            raise LinkError("interrupted: " + why.format(tick=frame.tick)) from None
+            if self._abort is not None:
+                raise self._fault(f"tick {frame.tick}") from None
+            why = f"the lockstep link to `{self.controller}` closed at tick {frame.tick} (it went away)"
+            raise LinkError("interrupted: " + why) from None
         finally:
             self._waiting_since = None
 
@@ -507,6 +610,19 @@ def make_telemetry(
     return TelemetryTee(rerun, table, rates=rates)
 
 
+class CountedLink(InProcessLink):
+    """A controller hosted in the body worker's process (``colocate: true``); each tick counts on the progress board."""
+
+    def __init__(self, controller: Controller, progress: Callable[[], None]) -> None:
+        super().__init__(controller)
+        self.progress = progress
+
+    def step(self, frame: SensorFrame) -> MotorCommand:
+        command = super().step(frame)
+        self.progress()
+        return command
+
+
 class Host:
     #: request nonces remembered to refuse a replayed request
     SEEN = 4096
@@ -529,6 +645,18 @@ class Host:
         # the lockstep stream of the current trial: [nonce, trial_id, next tick] (set by a controller reset)
         self._stream: list | None = None
         self.run_dir = Path(spec["run_dir"]) if spec.get("run_dir") else None
+        #: this process's slot on the run's progress board (:mod:`sfl_brain.liveness`), None for a host started by hand
+        board = spec.get("progress")
+        self.board = ProgressSlot(board["path"], board["slot"]) if board else None
+        self.progress = self.board.bump if self.board is not None else (lambda: None)
+
+    def controller_pid(self) -> Callable[[], int] | None:
+        """How a body worker finds its controller's process (from the board; it changes with each restart), or None
+        where the run has no board (a host started by hand: its link judges the controller by the wall clock)."""
+        slot = (self.spec.get("progress") or {}).get("controller")
+        if self.board is None or slot is None:
+            return None
+        return functools.partial(self.board.pid_of, slot)
 
     def stop(self) -> None:
         """Leave the main loop; a trial in progress is interrupted at its next tick (from any thread). Requests
@@ -553,7 +681,12 @@ class Host:
         spec = self.spec
         self.module = make_module(spec["reference"], spec["params"], spec["seed"], spec["spec_name"])
         self.module.run_dir = self.run_dir  # where the module may write files (None: anywhere)
-        self.session = bus.open_session(spec["listen"], spec["connect"], zenoh_config=spec.get("zenoh_config"))
+        self.session = bus.open_session(
+            spec["listen"],
+            spec["connect"],
+            zenoh_config=spec.get("zenoh_config"),
+            lease_ms=spec.get("lease_ms", bus.LEASE_MS),
+        )
         declared = []
         streams: list[tuple[str, Any, threading.Thread]] = []
         rec = None
@@ -595,7 +728,7 @@ class Host:
                         rec, controller, spec.get("record"), self.run_dir, f"{self.instance}.controller", live, seconds
                     )
                     sinks.append(controller.telemetry)
-                    self.module.link = InProcessLink(controller)
+                    self.module.link = CountedLink(controller, self.progress)
                 elif self.module.COMMANDS and connect_end is not None:
                     self.link = SocketLink(
                         self.session,
@@ -607,6 +740,8 @@ class Host:
                         endpoint=connect_end,
                         secret=spec.get("secret"),
                         drops=self.drops,
+                        controller_pid=self.controller_pid(),
+                        progress=self.progress,
                     )
                     self.module.link = self.link
                 elif self.module.COMMANDS:
@@ -620,6 +755,8 @@ class Host:
                         secret=spec.get("secret"),
                         drops=self.drops,
                         ticks=self.ticks,
+                        controller_pid=self.controller_pid(),
+                        progress=self.progress,
                     )
                     self.module.link = self.link
             for message_type in type(self.module).handles:
@@ -683,6 +820,7 @@ class Host:
                 self.ticks.close()
             self.session.close()
             self.write_counters()
+            # the board stays mapped until the process exits: a lockstep thread still returning may count a tick
 
     def write_counters(self) -> None:
         """``<run_dir>/logs/<instance>.counters.json``: ``{"dropped": {reason: n}}``."""
@@ -750,6 +888,7 @@ class Host:
                 return
             msg = decode(body)
             reply = self.module.handle(msg, checked=True)
+            self.progress()
             if type(msg) is ControllerReset:  # the trial whose frames this controller answers from now on
                 self._stream = [nonce, msg.trial_id, 0]
             query.reply(query.key_expr, self.seal.seal_reply(nonce, encode(reply)))
@@ -818,6 +957,7 @@ class Host:
             except Exception:
                 log.exception("%s: error handling a stream message", self.instance)
                 return None
+            self.progress()
         return reply
 
 

@@ -83,6 +83,9 @@ class LocalModules:
     def wait_for_workers(self, timeout: float) -> None:
         """Never needed: every body of the plan is a worker, always."""
 
+    def coming(self) -> bool:
+        return False
+
 
 def run_local(plan: Plan, run_dir: Path | None = None, through_codec: bool = True) -> list[dict]:
     """Run the plan's protocol in-process; return the record rows."""

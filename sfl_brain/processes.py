@@ -39,6 +39,8 @@ class Child:
     generation: int = 0
     #: of the current start: its liveliness token must carry it
     nonce: str = ""
+    #: why the supervisor is ending it (``hung: ...``), until its exit is handled
+    hung: str = ""
 
     @property
     def name(self) -> str:
@@ -112,6 +114,21 @@ def exits_soon(proc: subprocess.Popen, grace: float = 1.0) -> bool:
         return True
     except subprocess.TimeoutExpired:
         return False
+
+
+def running(proc: subprocess.Popen | None) -> bool:
+    """Whether ``proc`` still runs: not exited, and not a zombie waiting to be reaped (where ``/proc`` says so; the
+    thread that waits for its exit holds ``Popen``'s lock, so ``poll()`` cannot tell that until it is reaped)."""
+    if proc is None or proc.returncode is not None:
+        return False
+    try:
+        with open(f"/proc/{proc.pid}/stat", "rb") as f:
+            stat = f.read()
+    except FileNotFoundError:
+        return False
+    except OSError:  # no /proc here
+        return proc.poll() is None
+    return stat[stat.rindex(b")") + 2 : stat.rindex(b")") + 3] not in (b"Z", b"X")
 
 
 def log_tail(path: Path, lines: int = 12) -> str:

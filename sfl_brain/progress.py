@@ -87,3 +87,5 @@ class ProgressView:
         recording = run_dir / "recording.rrd"
         view = f"rerun {recording}" if recording.exists() else f"rerun {run_dir / 'rerun'}/*.rrd (not merged)"
         say(f"  inspect: sfl inspect {run_dir}    view: {view}")
+        if summary.get("protocol") == "learn" and summary["status"] in ("failed", "interrupted"):
+            say(f"  resume: sfl run --resume {run_dir}    (goes on from its last recorded trial)")

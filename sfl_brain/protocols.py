@@ -94,9 +94,12 @@ class Conductor:
                 ticket = self.modules.submit(worker, request, timeout)
                 busy[ticket] = (worker, request, time.perf_counter())
             if not busy:
-                deadline_no_worker = deadline_no_worker or time.monotonic() + self.plan.scenario.timeouts.ready
-                if time.monotonic() > deadline_no_worker:
-                    raise RunError("no body worker is alive to run trials")
+                if self.modules.coming():  # a body worker or controller restarting: waited for while it starts
+                    deadline_no_worker = None
+                else:
+                    deadline_no_worker = deadline_no_worker or time.monotonic() + self.plan.scenario.timeouts.ready
+                    if time.monotonic() > deadline_no_worker:
+                        raise RunError("no body worker is alive to run trials")
                 self.modules.wait_for_workers(0.5)
                 continue
             deadline_no_worker = None

@@ -73,6 +73,20 @@ def numeric_platform() -> dict:
     }
 
 
+def describe_platform(numeric: dict | None) -> str:
+    """A numeric platform (:func:`numeric_platform`) in one line: ``x86_64, glibc 2.36, numpy 2.4.6 SIMD X86_V2
+    dispatching X86_V3, OpenBLAS Haswell``."""
+    if not numeric:
+        return "numeric platform not recorded"
+    simd = numeric.get("numpy_simd") or {}
+    parts = [numeric.get("machine") or "?", numeric.get("libc") or ""]
+    numpy = f"numpy {numeric['numpy']} " if numeric.get("numpy") else "numpy "
+    baseline, dispatched = "+".join(simd.get("baseline") or []), "+".join(simd.get("dispatched") or [])
+    parts.append(numpy + f"SIMD {baseline or '?'} dispatching {dispatched or 'nothing'}")
+    parts.append(f"OpenBLAS {numeric['blas']}" if numeric.get("blas") else "")
+    return ", ".join(p for p in parts if p)
+
+
 def _blas_core() -> str | None:
     """OpenBLAS's core type (e.g. ``Haswell``, ``SkylakeX``), read by threadpoolctl when it is installed."""
     try:
@@ -120,3 +134,12 @@ def provenance() -> dict:
         "source": str(source),
         "started": datetime.now(UTC).isoformat(timespec="seconds"),
     }
+
+
+def made_here() -> str:
+    """The line a page that a script writes itself (not ``sfl report``, whose pages say it of their runs) puts under its
+    title: the commit and numeric platform it was computed with, and the day."""
+    made = provenance()
+    commit = f"`{made['commit'][:7]}`" if made["commit"] else "no git commit"
+    dirty = " (with uncommitted changes)" if made["uncommitted_changes"] else ""
+    return f"Made at {commit}{dirty}, {made['started'][:10]}, on {describe_platform(made['numeric_platform'])}."

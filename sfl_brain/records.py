@@ -3,7 +3,7 @@
 A run folder holds:
 
 * ``scenario.yaml``: the resolved scenario (after ``--set`` and ``--seed``);
-* ``records.jsonl``: one JSON object per line, ``kind`` = ``decision`` or ``trial``,
+* ``records.jsonl``: one JSON object per line, ``kind`` = ``decision``, ``trial`` or ``retry``,
   appended and flushed as they happen (read with ``pandas.read_json(path, lines=True)``
   or ``pyarrow.json.read_json``); a kill loses at most the line being written;
 * ``recording.rrd``: the Rerun recording (per-process parts under ``rerun/`` until merged);
@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from .events import DecisionsMade, Events, TrialRecorded
+from .events import DecisionsMade, Events, TrialInterrupted, TrialRecorded
 from .messages import TrialResult
 from .metrics import safe_learning
 from .status import EnvironmentProblem
@@ -136,9 +136,18 @@ def trial_row(
     }
 
 
+def retry_row(event: TrialInterrupted) -> dict:
+    """One ``kind: retry`` row: trial ``trial`` was cut short (its body worker or controller died, hung, or lost its
+    link) and is run again from its start; ``attempt`` 1 for the first retry. Its trial row, when it comes, is the
+    retried trial's, as an uninterrupted run would have it."""
+    return {"kind": "retry", "trial": event.trial, "attempt": event.attempt, "reason": event.reason}
+
+
 def record_to(events: Events, writer: RecordWriter, decisions: bool = True) -> None:
-    """Write the rows a protocol publishes: every trial, and the decisions if ``decisions`` (``record.decisions``)."""
+    """Write the rows a protocol publishes: every trial, every retry of a trial, and the decisions if ``decisions``
+    (``record.decisions``)."""
     events.subscribe(TrialRecorded, lambda event: writer.write(event.row))
+    events.subscribe(TrialInterrupted, lambda event: writer.write(retry_row(event)))
     if decisions:
         events.subscribe(DecisionsMade, lambda event: writer.write_many(event.rows))
 

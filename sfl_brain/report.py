@@ -29,12 +29,14 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import yaml  # noqa: E402
 
+from .provenance import describe_platform  # noqa: E402
 from .records import read_records, run_status, summarise  # noqa: E402
 from .report_ch5 import ch5_sections, is_ch5_run  # noqa: E402
 from .report_conditions import conditions_section, is_conditions_run  # noqa: E402
 from .report_cpg import cpg_run, is_cpg_run, write_cpg_sections  # noqa: E402
 from .report_study import StudySettings, study_section  # noqa: E402
 from .report_sweep import is_grid_sweep, sweep_section  # noqa: E402
+from .report_terrain import terrain_sections  # noqa: E402
 
 
 def _figure(run_dir: Path, out: Path, scenario: dict, rows: list[dict]) -> str:
@@ -137,9 +139,12 @@ def _vigilance_figure(points: list[tuple[float, float, int]], out: Path, group: 
 
 
 def made_by(run_dirs: list[Path]) -> str:
-    """One line saying what made the runs: the source commits (and whether any had uncommitted changes) and the days
-    they started, from each run folder's ``provenance.json`` (its file time for runs made before ``started``)."""
-    commits, days, dirty, unknown = [], [], False, 0
+    """One line saying what made the runs: the source commits (and whether any had uncommitted changes), the days
+    they started and the numeric platforms they ran on, from each run folder's ``provenance.json`` (its file time for
+    runs made before ``started``). Re-running a page's command at its commit gives its numbers exactly on the same
+    numeric platform (the CPU's SIMD kernels that numpy and OpenBLAS use decide the last bits of a float, which a
+    walk amplifies: docs/records.md, "Reproducibility")."""
+    commits, days, platforms, dirty, unknown = [], [], [], False, 0
     for run_dir in run_dirs:
         path = run_dir / "provenance.json"
         try:
@@ -152,9 +157,12 @@ def made_by(run_dirs: list[Path]) -> str:
         dirty |= bool(made.get("uncommitted_changes"))
         started = made.get("started") or datetime.fromtimestamp(path.stat().st_mtime, UTC).isoformat()
         days += [started[:10]] if started[:10] not in days else []
+        platform = describe_platform(made.get("numeric_platform"))
+        platforms += [platform] if platform not in platforms else []
     text = (
         f"Runs made at {', '.join(f'`{c}`' for c in commits) or 'an unknown commit'}"
         f"{' (some with uncommitted changes)' if dirty else ''}, started {', '.join(sorted(days)) or 'on unknown days'}"
+        f", on {'; '.join(platforms) or 'an unknown numeric platform'}"
     )
     return text + (f"; {unknown} runs have no provenance.json." if unknown else ".")
 
@@ -243,6 +251,7 @@ def write_report(run_dirs: list[Path], out: Path, study: StudySettings | None = 
     vigilance_lines += [""] + ch5_sections(ch5_runs, out) if ch5_runs else []
     for scenario, completed_runs, skipped in conditions.values():
         vigilance_lines += [""] + conditions_section(scenario, completed_runs, skipped, out)
+        vigilance_lines += terrain_sections(scenario, completed_runs)
     names = sorted({r["scenario"] for r in cpg_results})
     stem = names[0] if len(cpg_results) == len(run_dirs) and len(names) == 1 else None
     if len(conditions) == 1 and sum(len(c[1]) + len(c[2]) for c in conditions.values()) == len(run_dirs):

@@ -164,10 +164,34 @@ TORSO_SERIES = {
 }
 
 
+#: the ankle adaptation and the foot detector (issue 29): each foot's sensed slope, each ankle's centre shift, the
+#: foot_slope detector's band and the switch (orange), in degrees
+TERRAIN_SERIES = {
+    "/controller/terrain/slope_l": rr.SeriesLines(names="sensed slope, left foot (deg)", colors=[(40, 110, 220)]),
+    "/controller/terrain/slope_r": rr.SeriesLines(names="sensed slope, right foot (deg)", colors=[(230, 140, 30)]),
+    "/controller/terrain/ankle_centre_l": rr.SeriesLines(
+        names="left ankle's centre shift (deg)", colors=[(110, 170, 240)]
+    ),
+    "/controller/terrain/ankle_centre_r": rr.SeriesLines(
+        names="right ankle's centre shift (deg)", colors=[(240, 190, 120)]
+    ),
+    "/controller/terrain/band_low": rr.SeriesPoints(
+        names="detector band, low (deg)", colors=[(240, 140, 20)], marker_sizes=1.5
+    ),
+    "/controller/terrain/band_high": rr.SeriesPoints(
+        names="detector band, high (deg)", colors=[(240, 140, 20)], marker_sizes=1.5
+    ),
+    "/controller/terrain/switch": rr.SeriesPoints(
+        names="switch", colors=[(240, 140, 20)], markers="diamond", marker_sizes=8.0
+    ),
+}
+
+
 def humanoid_layout(timeline: str, learning: bool) -> rrb.Blueprint:
     """The humanoid's layout (chapter 5). Left, a logged trial on ``sim_time``: the walk (every NAO link as a box, the
     ground, seen from the side by a camera that follows the robot along x), the torso pitch with the terrain switch's
-    threshold and the switch marked, the torso's distance. Right, when ``learning``, per trial: both maps (the success
+    threshold and the switch marked, the slope each foot senses with each ankle's centre and the foot detector's band
+    (issue 29), the torso's distance. Right, when ``learning``, per trial: both maps (the success
     map coloured by each neuron's learnt reward, each trial's winning neurons labelled) and the tried points, eta
     (5.8), rho (5.2), s_vig with its band and N_s/N_f, the winning neurons' indices; without learning (a
     conditions run), each trial's outcome; then the events."""
@@ -189,8 +213,14 @@ def humanoid_layout(timeline: str, learning: bool) -> rrb.Blueprint:
             overrides=TORSO_SERIES,
             time_ranges=trial_range,
         ),
+        rrb.TimeSeriesView(
+            name="the slope each foot senses, each ankle's centre, the foot detector's band and the switch (deg)",
+            contents=list(TERRAIN_SERIES),
+            overrides=TERRAIN_SERIES,
+            time_ranges=trial_range,
+        ),
         rrb.TimeSeriesView(name="torso's distance x (m)", contents=["/body/path/x"], time_ranges=trial_range),
-        row_shares=[4, 3, 2],
+        row_shares=[4, 3, 3, 2],
     )
     events = rrb.TextLogView(
         name="events (terrain switches, trials)",

@@ -38,7 +38,10 @@ from .events import (
     Events,
     ModuleAlive,
     ModuleDied,
+    ModuleHung,
     ModuleSilent,
+    ModuleStopped,
+    PlacementYielded,
     Progress,
     ProgressUpdated,
     Restarted,
@@ -305,19 +308,30 @@ def tell(events: Events) -> None:
 
     def restarted(e: Restarted) -> None:
         log.warning("module %s exited with code %s: restart %d/%d", e.name, e.exit_code, e.restart, e.max_restarts)
-        print(
-            f"sfl: module `{e.name}` died (exit code {e.exit_code}); restarting ({e.restart}/{e.max_restarts})",
-            file=sys.stderr,
-        )
+        how = f"was {e.cause}: killed" if e.cause else f"died (exit code {e.exit_code})"
+        print(f"sfl: module `{e.name}` {how}; restarting ({e.restart}/{e.max_restarts})", file=sys.stderr)
 
     events.subscribe(Restarted, restarted)
+    events.subscribe(ModuleHung, lambda e: print(f"sfl: {e.describe()}", file=sys.stderr, flush=True))
+
+    def stopped(e: ModuleStopped) -> None:
+        if e.stopped:
+            print(f"sfl: module `{e.name}` is stopped (SIGSTOP? a suspended machine?): waiting for it", file=sys.stderr)
+        else:
+            print(f"sfl: module `{e.name}` runs again", file=sys.stderr)
+
+    events.subscribe(ModuleStopped, stopped)
+    events.subscribe(
+        PlacementYielded,
+        lambda e: print(f"sfl: other work keeps {e.busy} busy: the placement yields; {e.placement}", flush=True),
+    )
     events.subscribe(
         TrialInterrupted, lambda e: print(f"sfl: trial {e.trial} interrupted ({e.reason}); retrying", flush=True)
     )
     events.subscribe(ModuleAlive, lambda e: log.info("%s is alive", e.name))
     events.subscribe(WorkerJoined, lambda e: log.info("external worker %s joined", e.name))
     events.subscribe(WorkerLeft, lambda e: log.warning("external worker %s left", e.name))
-    events.subscribe(ModuleSilent, lambda e: log.warning("%s went silent (lease expired): killing it", e.name))
+    events.subscribe(ModuleSilent, lambda e: log.warning("%s lost its link but runs: waited for", e.name))
     events.subscribe(ModuleDied, lambda e: log.error("module %s died with exit code %s", e.name, e.exit_code))
 
 

@@ -8,6 +8,16 @@ the waiting thread, so waiting for a reply also notices a dead module at once in
 time-out. Zenoh callbacks only put on that queue; so does the run's signal handler
 (:meth:`Supervisor.raise_at_wait`), so Ctrl-C is raised in the waiting thread, never inside a callback.
 
+A module process on this machine is judged by its progress, not by the wall clock (:mod:`sfl_brain.liveness`): while
+the run waits on it (a request in flight, or its start), the supervisor samples it every :data:`WATCH_PERIOD` s and
+counts the time it had the CPU without progress (a reply, a request or tick counted on the run's progress board); a
+body worker and its controller process count as one. A process stopped (SIGSTOP, a suspended laptop), starved or
+niced is waited for; one that had the CPU for its ``timeouts`` without progress is hung (:class:`ModuleHung`): a
+body worker or controller is killed (and restarted by its policy, the trial retried), a brain module fails the run.
+The Zenoh sessions of the run's own processes have a lease of a day (:data:`bus.LOCAL_LEASE_MS`): silence is no
+test on one machine. A worker on another machine (``sfl worker``) cannot be seen: its own lease (``timeouts.lease``)
+is the test, and ``timeouts.trial`` of wall time caps its trial.
+
 Faults are types. A request whose target exits, leaves, or answers with a :class:`~sfl_brain.host.LinkError`
 (its controller died or hung mid-trial) ends :class:`~sfl_brain.service.Interrupted`: the protocol may
 send it again. Bodies and controllers may be restarted by policy (they hold no state between
@@ -42,10 +52,22 @@ import zenoh
 
 from . import bus, processes, ticklink
 from .body import Body, Controller
-from .events import Events, ModuleAlive, ModuleDied, ModuleSilent, Restarted, WorkerJoined, WorkerLeft
-from .host import LinkError
+from .events import (
+    Events,
+    ModuleAlive,
+    ModuleDied,
+    ModuleHung,
+    ModuleSilent,
+    ModuleStopped,
+    PlacementYielded,
+    Restarted,
+    WorkerJoined,
+    WorkerLeft,
+)
+from .host import WATCHED_WAIT, ControllerHung, LinkError
+from .liveness import NoProgressClock, ProgressBoard, cpu_sample
 from .messages import Message, MessageError, NonFiniteError, SensorFrame, decode, encode
-from .placement import Pair, Placement, place, usable_cpus
+from .placement import BUSY, CoreWatch, Pair, Placement, core_load, pin_process, place, usable_cpus
 from .processes import Child, Exited, kill_quietly, log_tail
 from .scenario import Instance, Plan
 from .service import Interrupted, Outcome, RunError
@@ -62,7 +84,10 @@ RUN_TOKEN = "@run"
 UNIX_PATH_MAX = 104
 
 #: exception types a module host names in an error reply that mean "cut short, send it again"
-RETRYABLE = frozenset({LinkError.__name__})
+RETRYABLE = frozenset({LinkError.__name__, ControllerHung.__name__})
+
+#: s between two looks at the processes the run waits on (:mod:`sfl_brain.liveness`)
+WATCH_PERIOD = 0.5
 
 
 # ---------------------------------------------------------------- what arrives on the supervisor's queue
@@ -96,6 +121,13 @@ class QueryEnded:
 
 
 @dataclass(frozen=True)
+class HungController:
+    """Body worker ``body`` found its controller process hung (:class:`~sfl_brain.host.ControllerHung`)."""
+
+    body: str
+
+
+@dataclass(frozen=True)
 class Wake:
     """Nothing happened: wakes the waiting thread to look at :meth:`Supervisor.raise_at_wait`'s request."""
 
@@ -106,6 +138,8 @@ class Pending:
     message: Message
     outcome: Outcome | None = None
     done: bool = False
+    #: s its target may have the CPU without answering (``timeouts.request`` or ``timeouts.trial``)
+    limit: float = float("inf")
 
 
 def remote_fault(target: str, tag: str, text: str) -> RunError | Interrupted:
@@ -124,6 +158,27 @@ def lockstep_pairs(plan: Plan) -> tuple[list[Pair], list[str]]:
         pairs.append(Pair(body, controller if controller in by_name else None))
     paired = {name for p in pairs for name in (p.body, p.controller)}
     return pairs, [i.name for i in plan.instances if i.name not in paired]
+
+
+def watched_units(plan: Plan) -> dict[str, tuple[str, ...]]:
+    """The processes judged together (:mod:`sfl_brain.liveness`) by each process's name: a body worker and its
+    controller process take turns, so neither makes progress while the other holds it; every other process alone."""
+    pairs, others = lockstep_pairs(plan)
+    units: dict[str, tuple[str, ...]] = {name: (name,) for name in others}
+    for pair in pairs:
+        unit = (pair.body, pair.controller) if pair.controller is not None else (pair.body,)
+        for name in unit:
+            units[name] = unit
+    return units
+
+
+def initial_placement(plan: Plan) -> Placement:
+    """The run's placement (:func:`sfl_brain.placement.place`) on the cores it may use; with ``pin_cpus: auto`` and
+    a pair to place on more than one core, after measuring what other work keeps each core busy with."""
+    pairs, others = lockstep_pairs(plan)
+    mode, cpus = plan.scenario.lockstep.pin_cpus, usable_cpus()
+    measure = mode == "auto" and len(cpus) > 1 and any(p.controller is not None for p in pairs)
+    return place(pairs, others, cpus, mode, core_load(cpus) if measure else None)
 
 
 def hosted_spec(inst: Instance | None) -> dict | None:
@@ -183,17 +238,29 @@ class Supervisor:
         self._drops.counts = self.dropped
         self._token = None
         #: each body worker and its controller process on a core of their own, as lockstep.pin_cpus says
-        self.placement: Placement = place(*lockstep_pairs(plan), usable_cpus(), plan.scenario.lockstep.pin_cpus)
-        #: the lockstep links: a folder only this user may enter, and each pair's end in it by instance
+        self.placement: Placement = initial_placement(plan)
+        #: what other work keeps the pairs' cores busy with while the run goes on (``auto``: the placement yields)
+        self._core_watch = CoreWatch(self.placement.usable) if self.placement.mode == "auto" else None
+        #: the run's private folder (only this user may enter): the lockstep links' sockets, the progress board
+        self.private: str | None = None
         self.tick_folder: str | None = None
         self.ticks: dict[str, dict[str, list[str]]] = {}
+        self._ticks_on = ""
+        #: what each module process got done (:mod:`sfl_brain.liveness`), and how the run judges them
+        self.board: ProgressBoard | None = None
+        self.units = watched_units(plan)
+        self._clocks: dict[tuple[str, ...], NoProgressClock] = {}
+        self._next_watch = 0.0
+        self._stopped: set[str] = set()  # processes the run waits on that were seen stopped (told once)
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:
         if self.endpoint is None:
             bus.check_listen(self.listen)  # a port in use: one clear line, not a Zenoh traceback
         try:
-            self.session = bus.open_session(self.listen, self.connect, zenoh_config=self.zenoh_config)
+            self.session = bus.open_session(
+                self.listen, self.connect, zenoh_config=self.zenoh_config, lease_ms=bus.LOCAL_LEASE_MS
+            )
         except Exception as exc:  # zenoh.ZError: an endpoint it cannot listen on, a bad config file
             first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
             raise EnvironmentProblem(
@@ -206,6 +273,8 @@ class Supervisor:
         )
         (self.run_dir / "logs").mkdir(parents=True, exist_ok=True)
         (self.run_dir / "rerun").mkdir(parents=True, exist_ok=True)
+        self.private = tempfile.mkdtemp(prefix="sfl-")  # 0700: only this user may connect, read or write
+        self.board = ProgressBoard(self.private, [inst.name for inst in self.plan.instances])
         self._place()
         if self.endpoint is None:  # others may join (sfl worker): the secret, readable by this user only
             path = self.run_dir / "secret"
@@ -219,13 +288,9 @@ class Supervisor:
             child = Child(inst, self.run_dir / "logs" / f"{inst.name}.log")
             self.children[inst.name] = child
             self._spawn(child)
-        deadline = time.monotonic() + self.plan.scenario.timeouts.ready
-        while not all(c.alive for c in self.children.values()):
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                waiting = [c.name for c in self.children.values() if not c.alive]
-                raise RunError(f"modules not ready after {self.plan.scenario.timeouts.ready:g} s: {waiting}")
-            self._handle(self._next_event(remaining), starting=True)
+        while not all(c.alive for c in self.children.values()):  # as long as they start (the watch says)
+            self._handle(self._next_event(WATCH_PERIOD), starting=True)
+            self._watch(starting=True)
 
     def spec_for(self, inst: Instance) -> dict:
         colocated = inst.colocated
@@ -245,6 +310,8 @@ class Supervisor:
             "trial_seconds": self.plan.trial_seconds,  # where each trial starts on sim_time
             "realtime": self.realtime,
             "tick_timeout": self.plan.scenario.timeouts.tick,
+            "lease_ms": bus.LOCAL_LEASE_MS,
+            "progress": self._progress_spec(inst),
             "spin": self.plan.scenario.lockstep.spin_us * 1e-6,
             "colocated": hosted_spec(colocated),
             "cpus": self.placement.of(inst.name),
@@ -255,6 +322,16 @@ class Supervisor:
         }
         return spec
 
+    def _progress_spec(self, inst: Instance) -> dict | None:
+        """A host's slot on the progress board, and for a body worker its controller process's slot."""
+        if self.board is None:
+            return None
+        spec = self.board.spec(inst.name)
+        controller = inst.routes.get(SensorFrame.TAG)
+        if controller in self.board.slots:
+            spec["controller"] = self.board.slots[controller]
+        return spec
+
     def _place(self) -> None:
         """Give each body worker and its controller process their lockstep link, and say where
         every process runs: ``logs/placement.json`` and one line on the terminal."""
@@ -262,7 +339,7 @@ class Supervisor:
         pairs = [p for p in pairs if p.controller is not None]
         links = "the mesh (no Unix sockets here)"
         if pairs and hasattr(socket, "AF_UNIX") and os.name != "nt":  # Zenoh has no unixsock-stream on Windows
-            self.tick_folder = tempfile.mkdtemp(prefix="sfl-")  # 0700: only this user may connect
+            self.tick_folder = self.private
             if len(os.fsencode(self.tick_folder)) + len(f"/{len(pairs)}.sock") < UNIX_PATH_MAX:
                 on_socket = self.plan.scenario.lockstep.link == "socket" and ticklink.available()
                 endpoint_of = ticklink.endpoint if on_socket else bus.tick_endpoint
@@ -276,11 +353,24 @@ class Supervisor:
                 links = f"lockstep links ({kind}) in {self.tick_folder}"
             else:
                 links = f"the mesh (the temporary folder {self.tick_folder} is too long a path for a Unix socket)"
-        placed = self.placement.to_json() | {"lockstep_links": self.ticks, "ticks_on": links}
-        (self.run_dir / "logs" / "placement.json").write_text(json.dumps(placed, indent=1) + "\n")
+        self._ticks_on = links
+        self._write_placement()
         log.info("%s; ticks on %s", self.placement.describe(), links)
         if pairs:
             print(f"sfl: {self.placement.describe()}", flush=True)
+
+    def _write_placement(self) -> None:
+        """``logs/placement.json``: where each process runs now, and each placement before it (``earlier``)."""
+        path = self.run_dir / "logs" / "placement.json"
+        earlier = []
+        if path.exists():
+            try:
+                old = json.loads(path.read_text())
+                earlier = old.pop("earlier", []) + [{k: old[k] for k in ("cores", "reason", "load") if k in old}]
+            except (OSError, ValueError):
+                earlier = []
+        placed = self.placement.to_json() | {"lockstep_links": self.ticks, "ticks_on": self._ticks_on}
+        path.write_text(json.dumps(placed | ({"earlier": earlier} if earlier else {}), indent=1) + "\n")
 
     def listen_for_children(self) -> list[str]:
         host = "127.0.0.1"
@@ -316,9 +406,12 @@ class Supervisor:
         if self.secret_file is not None:
             self.secret_file.unlink(missing_ok=True)
             self.secret_file = None
-        if self.tick_folder is not None:
-            shutil.rmtree(self.tick_folder, ignore_errors=True)
-            self.tick_folder = None
+        if self.board is not None:
+            self.board.close()
+            self.board = None
+        if self.private is not None:
+            shutil.rmtree(self.private, ignore_errors=True)
+            self.private = self.tick_folder = None
         if self.session is not None:
             self.session.close()
             self.session = None
@@ -347,6 +440,8 @@ class Supervisor:
                 pending = self.pending.get(ticket)
                 if pending is not None and not pending.done:
                     pending.outcome, pending.done = outcome, True
+                    if isinstance(outcome, Interrupted):
+                        self._controller_exiting(pending.target)
             case QueryEnded(ticket):
                 self._query_ended(ticket)
             case TokenDeclared(name, nonce):
@@ -355,6 +450,25 @@ class Supervisor:
                 self._token_gone(name, nonce)
             case Exited(name, exit_code, generation):
                 self._exited(name, exit_code, generation, starting)
+            case HungController(body):
+                controller = self.children[body].instance.routes.get(SensorFrame.TAG) if body in self.children else None
+                if controller in self.children:
+                    limit = self.plan.scenario.timeouts.tick
+                    hung = ModuleHung(controller, limit, "timeouts.tick", limit, "answering a tick (its body says)")
+                    self._end_hung(controller, hung)
+
+    def _controller_exiting(self, body: str) -> None:
+        """A body worker's trial was cut short: if its controller process is dying (the body saw its link close while
+        the process still tears down), it is no longer alive, so that the trial waits for its restart instead of
+        going back to it (its exit, handled next, restarts it)."""
+        controller = (
+            self.children.get(self.children[body].instance.routes.get(SensorFrame.TAG, ""))
+            if (body in self.children)
+            else None
+        )
+        if controller is not None and controller.alive and controller.proc is not None:
+            if processes.exits_soon(controller.proc, grace=0.2):
+                controller.alive = False
 
     def _query_ended(self, ticket: int) -> None:
         pending = self.pending.get(ticket)
@@ -407,26 +521,135 @@ class Supervisor:
         if child.stopping or nonce != child.nonce:  # a previous spawn's token going away
             return
         child.alive = False
-        if child.proc is not None and child.proc.poll() is None:
+        if child.proc is not None and child.proc.poll() is None:  # it runs: waited for, judged by its progress
             self.events.publish(ModuleSilent(name))
-            child.proc.kill()
 
     def _exited(self, name: str, exit_code: int, generation: int, starting: bool) -> None:
         child = self.children.get(name)
         if child is None or child.stopping or generation != child.generation:
             return
         child.alive = False
-        self._interrupt(name, f"module `{name}` exited with code {exit_code}")
+        cause, child.hung = child.hung, ""
+        self._interrupt(name, f"module `{name}` {cause + ': killed' if cause else f'exited with code {exit_code}'}")
         inst = child.instance
-        restartable = issubclass(inst.cls, Body | Controller)  # no state between trials
-        if inst.restart == "on-failure" and restartable and child.restarts < inst.max_restarts:
+        if self._restartable(child) and child.restarts < inst.max_restarts:
             child.restarts += 1
-            self.events.publish(Restarted(name, exit_code, child.restarts, inst.max_restarts))
+            self.events.publish(Restarted(name, exit_code, child.restarts, inst.max_restarts, cause))
             self._spawn(child)
             return
-        died = ModuleDied(name, inst.reference, exit_code, str(child.log_path), log_tail(child.log_path), starting)
+        died = ModuleDied(
+            name, inst.reference, exit_code, str(child.log_path), log_tail(child.log_path), starting, cause
+        )
         self.events.publish(died)
         raise RunError(died.describe())
+
+    @staticmethod
+    def _restartable(child: Child) -> bool:
+        """Its policy restarts it (``restart: on-failure``), and it holds no state between trials."""
+        inst = child.instance
+        return inst.restart == "on-failure" and issubclass(inst.cls, Body | Controller)
+
+    # ------------------------------------------------------------------ liveness by progress
+    def _watch(self, starting: bool = False) -> None:
+        """Every :data:`WATCH_PERIOD` s: look at each group of processes the run waits on (:meth:`_waited_on`) and
+        end those that had the CPU past their time without progress (:mod:`sfl_brain.liveness`)."""
+        now = time.monotonic()
+        if now < self._next_watch or self.board is None:
+            return
+        self._next_watch = now + WATCH_PERIOD
+        waited = self._waited_on()
+        for unit in [u for u in self._clocks if u not in waited]:
+            del self._clocks[unit]
+        for unit, (limit, key, doing, tickets) in waited.items():
+            procs = [self.children[name].proc for name in unit]
+            samples = [cpu_sample(proc.pid) if proc is not None else None for proc in procs]
+            self._tell_stopped(unit, samples)
+            marks = (tuple(self.board.read(name)[1] for name in unit), tickets)
+            clock = self._clocks.setdefault(unit, NoProgressClock())
+            had = clock.update(samples, marks)
+            if had <= limit:
+                continue
+            used = clock.used()
+            spinning = [name for name, cpu in zip(unit, used, strict=True) if cpu > 0.25 * had]
+            clock.reset()
+            for name in spinning or unit:
+                hung = ModuleHung(name, had, key, limit, doing)
+                if starting and not self._restartable(self.children[name]):
+                    self.events.publish(hung)
+                    child = self.children[name]
+                    raise RunError(
+                        f"modules not ready: {hung.describe()}; its log ({child.log_path}):\n{log_tail(child.log_path)}"
+                    )
+                self._end_hung(name, hung)
+
+    def _tell_stopped(self, unit: tuple[str, ...], samples: list) -> None:
+        """Say once when a process the run waits on is stopped, and when it runs again."""
+        for name, sample in zip(unit, samples, strict=True):
+            stopped = sample is not None and sample.state in "Tt"
+            if stopped != (name in self._stopped):
+                (self._stopped.add if stopped else self._stopped.discard)(name)
+                self.events.publish(ModuleStopped(name, stopped))
+
+    def _yield_cores(self) -> None:
+        """``pin_cpus: auto``: every :data:`~sfl_brain.placement.RECHECK_S` s, what other work keeps each core busy
+        with (the cores' busy time less this run's pinned processes'); a pair's core busier than
+        :data:`~sfl_brain.placement.BUSY` makes the placement yield: placed again on the load now (the pair moves to a
+        quiet core, or nothing stays pinned), every process moved, and the user told."""
+        watch = self._core_watch
+        if watch is None or not self.placement.cores or not watch.due():
+            return
+        used: dict[int, float] = {}
+        for name, cores in self.placement.cores.items():
+            child = self.children.get(name)
+            sample = cpu_sample(child.proc.pid) if child is not None and child.proc is not None else None
+            if sample is not None and len(cores) == 1:
+                used[cores[0]] = used.get(cores[0], 0.0) + sample.cpu
+        load = watch.sample(used)
+        pairs, others = lockstep_pairs(self.plan)
+        paired = {n for p in pairs if p.controller is not None for n in (p.body, p.controller)}
+        pair_cores = {c for name, cores in self.placement.cores.items() if name in paired for c in cores}
+        trapped = sorted(c for c in pair_cores if load is not None and load.get(c, 0.0) > BUSY)
+        if not trapped:
+            return
+        before = self.placement
+        self.placement = place(pairs, others, list(before.usable), before.mode, load)
+        for name, child in self.children.items():
+            if child.proc is not None and before.of(name) != self.placement.of(name):
+                pin_process(child.proc.pid, self.placement.of(name) or before.usable)
+        busy = ", ".join(f"core {c} {load[c]:.0%}" for c in trapped)
+        self.events.publish(PlacementYielded(busy, self.placement.describe()))
+        self._write_placement()
+
+    def _waited_on(self) -> dict[tuple[str, ...], tuple[float, str, str, tuple[int, ...]]]:
+        """The groups of processes (:func:`watched_units`) the run waits on now, each with its time (s of CPU without
+        progress), that time's scenario key, what it is doing, and the requests it works on: those with a request in
+        flight (a brain module: ``timeouts.request``; a body worker and its controller: ``timeouts.trial``), and each
+        process that is starting (``timeouts.ready``)."""
+        timeouts = self.plan.scenario.timeouts
+        waited: dict[tuple[str, ...], tuple[float, str, str, tuple[int, ...]]] = {}
+        for ticket, pending in self.pending.items():
+            if pending.done or pending.target not in self.children:
+                continue
+            unit = self.units[pending.target]
+            key = "timeouts.trial" if pending.target in self.plan.bodies else "timeouts.request"
+            tickets = waited.get(unit, (0, "", "", ()))[3] + (ticket,)
+            waited[unit] = (pending.limit, key, f"answering `{pending.message.TAG}`", tickets)
+        for child in self.children.values():
+            if not child.alive and not child.stopping and child.proc is not None and child.proc.poll() is None:
+                waited.setdefault((child.name,), (timeouts.ready, "timeouts.ready", "coming alive", ()))
+        return waited
+
+    def _end_hung(self, name: str, hung: ModuleHung) -> None:
+        """A hung process: a brain module fails the run (its learnt state is never thrown away); a body worker or
+        controller is killed, and its exit interrupts its trial and restarts it by its policy."""
+        child = self.children[name]
+        self.events.publish(hung)
+        if not issubclass(child.instance.cls, Body | Controller):
+            raise RunError(f"{hung.describe()}; its log ({child.log_path}):\n{log_tail(child.log_path)}")
+        if child.proc is not None and child.proc.poll() is None:
+            child.hung = f"hung: it could run for {hung.seconds:.1f} s and did not finish {hung.doing} ({hung.key})"
+            child.alive = False  # no trial goes to it (nor to its body) until its restart is alive
+            child.proc.kill()
 
     def _interrupt(self, name: str, why: str) -> None:
         affected = {name}
@@ -440,8 +663,13 @@ class Supervisor:
 
     # ------------------------------------------------------------------ requests (ModuleService)
     def submit(self, target: str, message: Message, timeout: float) -> int:
+        """Send ``message`` to ``target``. A module process of this run is waited for as long as it makes progress or
+        is denied the CPU; ``timeout`` is the CPU time it may take without progress (:meth:`_watch`). A worker on
+        another machine has ``timeout`` s of wall time."""
         ticket = next(self._tickets)
-        self.pending[ticket] = Pending(target, message)
+        self.pending[ticket] = Pending(target, message, limit=timeout)
+        own = target in self.children
+        wait = WATCHED_WAIT if own else timeout
         inbox, seal, drops = self._inbox, self.seal, self._drops
         key_expr = bus.key(self.run_id, target, message.TAG)
         nonce, payload = seal.seal_request(key_expr, encode(message))
@@ -460,13 +688,16 @@ class Supervisor:
                 data = seal.open_reply(nonce, reply.err.payload.to_bytes())
                 if data is None:  # Zenoh's own "Timeout" (QueryEnded decides), or a stranger's
                     return
-                inbox.put(Replied(ticket, remote_fault(target, message.TAG, data.decode(errors="replace"))))
+                text = data.decode(errors="replace")
+                if text.partition(":")[0] == ControllerHung.__name__:
+                    inbox.put(HungController(target))
+                inbox.put(Replied(ticket, remote_fault(target, message.TAG, text)))
 
         self.session.get(
             key_expr,
             zenoh.handlers.Callback(on_reply, lambda: inbox.put(QueryEnded(ticket)), indirect=False),
             payload=payload,
-            timeout=timeout,
+            timeout=wait,
             target=zenoh.QueryTarget.ALL,
             consolidation=zenoh.ConsolidationMode.NONE,  # every reply as it comes: a stranger's cannot hold ours
         )
@@ -484,7 +715,9 @@ class Supervisor:
             remaining = None if deadline is None else deadline - time.monotonic()
             if remaining is not None and remaining <= 0:
                 return []
-            self._handle(self._next_event(0.5 if remaining is None else min(0.5, remaining)))
+            self._handle(self._next_event(WATCH_PERIOD if remaining is None else min(WATCH_PERIOD, remaining)))
+            self._watch()
+            self._yield_cores()
 
     def workers(self) -> list[str]:
         """Body workers that can run a trial now (launched and joined from elsewhere): alive, and
@@ -494,13 +727,24 @@ class Supervisor:
         for name in self.plan.bodies:
             child = self.children[name]
             controller = self.children.get(child.instance.routes.get("controller.sensors", ""))
-            if child.alive and (controller is None or controller.alive):
+            # running: a controller that has just died may not be handled yet (its body saw its link close first)
+            if child.alive and (controller is None or (controller.alive and processes.running(controller.proc))):
                 own.append(name)
         return own + list(self.external_workers)
 
     def wait_for_workers(self, timeout: float) -> None:
         """Handle what arrives within ``timeout`` s (one event): a module coming back, a worker joining."""
-        self._handle(self._next_event(timeout))
+        self._handle(self._next_event(min(timeout, WATCH_PERIOD)))
+        self._watch()
+
+    def coming(self) -> bool:
+        """A body worker or controller process of this run is starting (a restart): it will be a worker soon, or be
+        found hung (``timeouts.ready``)."""
+        return any(
+            not c.alive and not c.stopping and c.proc is not None and c.proc.poll() is None
+            for c in self.children.values()
+            if issubclass(c.instance.cls, Body | Controller)
+        )
 
     def pids(self) -> list[int]:
         return [c.proc.pid for c in self.children.values() if c.proc is not None]

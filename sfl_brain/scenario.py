@@ -77,8 +77,11 @@ class Axis(Strict):
 class ModuleSpec(Strict):
     impl: str = Field(description="registered name, 'package.module:Class' or 'path/file.py:Class'")
     params: dict[str, Any] = {}
-    restart: Literal["never", "on-failure"] = Field(
-        "never", description="on-failure: restart a body worker or controller that dies (not brain modules)"
+    restart: Literal["never", "on-failure"] | None = Field(
+        None,
+        description="on-failure: restart a body worker or controller that dies or hangs, and retry its trial (the "
+        "default for them: they hold no state between trials); never: its death fails the run (the default, and the "
+        "only choice, for brain modules, whose learnt state a restart would lose)",
     )
     max_restarts: int = Field(3, ge=0, le=100)
     workers: int = Field(1, ge=1, le=64, description="bodies: processes serving trials in parallel")
@@ -168,7 +171,32 @@ class PatternSpaceAnalysis(Strict):
     where: dict[str, TrialValue] = Field({}, description="only logged trials with these grid values")
 
 
-Analysis = Annotated[PoincareAnalysis | TraceAnalysis | PatternSpaceAnalysis, Field(discriminator="kind")]
+class CommandJumpAnalysis(Strict):
+    """``sfl report``: how much a terrain switch itself changed the joint commands (issue 29): for every logged trial
+    of each condition, the largest change of any joint's command the switch made in one tick (the controller's
+    ``terrain_switch/command_jump`` series, rad), against ``limit``."""
+
+    kind: Literal["command_jump"]
+    limit: float = Field(0.02, gt=0, le=10, description="rad: the most a switch may change a command in one tick")
+    module: str = Field("controller", description="the scenario's module whose switch is read")
+
+
+class DetectionAnalysis(Strict):
+    """``sfl report``: the terrain detectors watched on every logged trial (issue 29; the controller's
+    ``events/detector``) against when a foot first touched the next piece of ground (the body's
+    ``events/terrain``): per condition and detector, walks it fired on, its latency, those within ``latency`` s and
+    before the torso pitch fell below ``pitch_below`` deg, and those that fired before the change."""
+
+    kind: Literal["detection"]
+    latency: float = Field(0.5, gt=0, le=60, description="s after the foot meets the new ground: fired in time")
+    pitch_below: float = Field(-5.0, ge=-90, le=90, description="deg: the torso pitch a detection must come before")
+    module: str = Field("controller", description="the scenario's module whose detectors are read")
+
+
+Analysis = Annotated[
+    PoincareAnalysis | TraceAnalysis | PatternSpaceAnalysis | CommandJumpAnalysis | DetectionAnalysis,
+    Field(discriminator="kind"),
+]
 
 
 class ConditionsProtocol(Strict):
@@ -310,14 +338,41 @@ class Record(Strict):
 
 
 class Timeouts(Strict):
-    ready: float = Field(60.0, gt=0, description="s for every module to come alive")
-    request: float = Field(30.0, gt=0, description="s for a brain module to answer")
-    trial: float = Field(300.0, gt=0, description="s of wall time for one trial")
+    """How long a run waits. A module process on this machine is waited for while it makes progress or is denied the
+    CPU: each of these times counts only the time it had the CPU and did nothing with it (sfl_brain.liveness), so a
+    busy machine, a nice level, a stop and continue (SIGSTOP/SIGCONT, a suspended laptop) make a run slower, never
+    fail it. Past its time, a process is hung."""
+
+    ready: float = Field(
+        60.0,
+        gt=0,
+        description="s a module process may have the CPU without coming alive (and `sfl check`: s of wall time for "
+        "importing a module's implementation)",
+    )
+    request: float = Field(
+        30.0,
+        gt=0,
+        description="s a brain module may have the CPU without answering a request: it is hung, the run fails naming "
+        "it (`sfl run --resume RUN_DIR` goes on)",
+    )
+    trial: float = Field(
+        300.0,
+        gt=0,
+        description="s a body worker and its controller process may have the CPU without a tick: hung, killed and "
+        "restarted, the trial retried; for a worker on another machine (sfl worker), s of wall time for one trial",
+    )
     tick: float = Field(
         10.0,
         gt=0,
-        description="s of wall time for a controller to answer one tick (or a reset); "
-        "a trial whose controller is later than this is interrupted and retried",
+        description="s a controller process may have the CPU without answering one tick (or a reset): hung, the trial "
+        "is interrupted and retried, the controller restarted",
+    )
+    lease: float = Field(
+        3.0,
+        ge=0.5,
+        le=3600,
+        description="s a worker on another machine (sfl worker) may be silent before the run gives it up and retries "
+        "its trial elsewhere (its Zenoh lease: a process there cannot be seen, only heard)",
     )
 
 
@@ -494,7 +549,9 @@ def _clean_loc(loc: tuple, kind: str) -> tuple:
         if len(out) == 1 and out[0] == "protocol" and part in ("learn", "sweep", "exploit", "conditions"):
             continue
         if (
-            len(out) >= 2 and out[-2] == "analyses" and part in ("poincare", "trace", "pattern_space")
+            len(out) >= 2
+            and out[-2] == "analyses"
+            and part in ("poincare", "trace", "pattern_space", "command_jump", "detection")
         ):  # an analysis's kind tag
             continue
         if out == ["protocol", "proposer"] and part in PROPOSERS:  # a proposer's kind tag
@@ -1114,6 +1171,14 @@ def _best_of(folder: str, base_dir: Path) -> dict | str:
     return {k: v for k, v in best["neuron_point"].items() if k != "v_unit" and isinstance(v, int | float)}
 
 
+def restart_policy(spec: ModuleSpec, cls: type[Module]) -> str:
+    """A module's ``restart`` policy: as the scenario says, else ``on-failure`` for body workers and controllers (they
+    hold no state between trials: a restart loses nothing) and ``never`` for brain modules (learnt state)."""
+    if spec.restart is not None:
+        return spec.restart
+    return "on-failure" if issubclass(cls, Body | Controller) else "never"
+
+
 def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
     raw, problems = learnt_values(raw, base_dir)
     if problems:
@@ -1342,7 +1407,7 @@ def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
                 reference,
                 params,
                 instance_seed(scenario.seed, name),
-                spec.restart,
+                restart_policy(spec, cls),
                 spec.max_restarts,
                 dict(routes),
             )
@@ -1359,7 +1424,7 @@ def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
                         cref,
                         cparams,
                         instance_seed(scenario.seed, controller_name),
-                        cspec.restart,
+                        restart_policy(cspec, ccls),
                         cspec.max_restarts,
                         {m.MotorCommand.TAG: inst_name},
                     )

@@ -48,3 +48,7 @@ class ModuleService(Protocol):
     def wait_for_workers(self, timeout: float) -> None:
         """Block until the set of workers may have changed, at most ``timeout`` seconds."""
         ...
+
+    def coming(self) -> bool:
+        """A body worker (or its controller) is starting again: the run waits for it instead of giving up."""
+        ...

@@ -60,6 +60,11 @@ def join_command(
     return text
 
 
+def lease_ms(plan: Plan) -> int:
+    """A worker's Zenoh lease (``timeouts.lease``, in ms): the run gives it up after this long without a word."""
+    return int(plan.scenario.timeouts.lease * 1000)
+
+
 def worker_spec(plan: Plan, run_id: str, name: str, connect: list[str], secret: str) -> dict:
     """The host spec of an external body worker (its controller in-process)."""
     body = next(i for i in plan.instances if i.spec_name == plan.body_spec)
@@ -77,6 +82,8 @@ def worker_spec(plan: Plan, run_id: str, name: str, connect: list[str], secret: 
         "rrd": None,
         "viewer": None,
         "tick_timeout": plan.scenario.timeouts.tick,
+        # on another machine the run cannot see this process, only hear it: its lease is the test (timeouts.lease)
+        "lease_ms": lease_ms(plan),
         "trial_seconds": plan.trial_seconds,
         "watch_stdin": False,
         "colocated": hosted_spec(ctrl),
@@ -145,7 +152,9 @@ def run_worker(
     previous = signal.signal(signal.SIGINT, lambda *_: interrupted.set())
     try:
         try:
-            session = bus.open_session(["tcp/127.0.0.1:0"], list(connect), zenoh_config=zenoh_config)
+            session = bus.open_session(
+                ["tcp/127.0.0.1:0"], list(connect), zenoh_config=zenoh_config, lease_ms=lease_ms(plan)
+            )
         except Exception as exc:
             raise WorkerError(f"cannot open a Zenoh session to {', '.join(connect)}: {exc}") from None
         try:

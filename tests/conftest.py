@@ -35,14 +35,12 @@ def pytest_sessionstart(session) -> None:
 
 def what_computes() -> list[str]:
     """The versions of what computes and checks, and the numeric platform (``sfl_brain.provenance``)."""
-    from sfl_brain.provenance import DISTRIBUTIONS, numeric_platform, versions
+    from sfl_brain.provenance import DISTRIBUTIONS, describe_platform, numeric_platform, versions
 
     found = versions((*DISTRIBUTIONS, "gymnasium", "cma", "optuna", "scikit-learn", "distributed", "pytest-xdist"))
-    here = numeric_platform()
     return [
         "sfl-brain test run with " + ", ".join(f"{k} {v}" for k, v in found.items()),
-        f"numeric platform: {here['machine']}, {here['libc']}, numpy SIMD {'+'.join(here['numpy_simd']['baseline'])}"
-        f" dispatching {'+'.join(here['numpy_simd']['dispatched']) or 'nothing'}, OpenBLAS {here['blas']}",
+        f"numeric platform: {describe_platform(numeric_platform())}",
     ]
 
 

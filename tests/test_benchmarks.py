@@ -95,6 +95,15 @@ def test_proposers_benchmark_prints_each_proposers_cost_beside_the_trial():
     figures(out, r"  cma +[\d.]+ +[\d.]+ +[\d.]+ +[\d.]+ +([\d.]+) %")
 
 
+def test_placement_benchmark_prints_both_placements_and_their_ratio():
+    out = bench("placement.py", "--rounds", "1", "--trials", "2", "--conditions", "pinned")
+    assert out.count("load average") == 2  # before and after the runs
+    figures(out, r"  pinned   before +([\d.]+)")
+    figures(out, r"   yields +([\d.]+)   yields/before")
+    figures(out, r"yields/before = ([\d.]+)")
+    assert "  pinned   before  body and controller share core" in out  # the placement before issue 34: pinned there
+
+
 def test_gym_benchmark_prints_the_door_against_the_bodys_own_tick():
     out = bench("gym.py", "--rounds", "2", "--block", "20", "--vector", "0")
     # per body: the body alone, the door unwrapped, through gymnasium.make, normalised; their ratios to the first

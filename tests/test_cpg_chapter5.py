@@ -455,7 +455,7 @@ def test_the_module_parameters_are_checked():
         "s.yaml: modules.controller.params.terrain_input: expected one of the inputs of circuit humanoid_nao "
         "['shoulder_pitch_l', 'shoulder_pitch_r', 'hip_pitch_l', 'hip_pitch_r', 'hip_roll_l', 'hip_roll_r', 'knee_l', "
         "'knee_r', 'ankle_pitch_l', 'ankle_pitch_r', 'ankle_roll_l', 'ankle_roll_r', 'heel_l', 'toe_l', 'heel_r', "
-        "'toe_r', 'torso_pitch', 'back']; got 'torso_pich' (did you mean `torso_pitch`?)"
+        "'toe_r', 'torso_pitch', 'back', 'torso_pitch_rate']; got 'torso_pich' (did you mean `torso_pitch`?)"
     ]
     [line] = scenario_problems({"switch_seconds": 0.0})
     assert line.startswith("s.yaml: modules.controller.params.switch_seconds: ")

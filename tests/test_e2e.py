@@ -14,6 +14,7 @@ from rerun.chunk import RrdReader
 
 from sfl_brain import bus
 from sfl_brain.local import run_local
+from sfl_brain.provenance import describe_platform
 from sfl_brain.records import read_records
 from sfl_brain.scenario import load
 
@@ -88,7 +89,10 @@ def test_learn_run_records_everything_and_matches_in_process(tmp_path):
     assert "| run | completed | learn | 0.0 | 60 |" in table
     made = json.loads((out / "provenance.json").read_text())  # the report says what made the run, and when
     assert f"Runs made at `{(made['commit'] or 'no git commit')[:7]}`" in table
-    assert f"started {made['started'][:10]}." in table
+    platform = describe_platform(made["numeric_platform"])  # and on what its floats were computed
+    assert f"started {made['started'][:10]}, on {platform}." in table and platform.startswith(
+        made["numeric_platform"]["machine"]
+    )
 
 
 def test_sfl_list_names_every_registered_implementation():
@@ -104,7 +108,7 @@ def test_sfl_list_names_every_registered_implementation():
         assert any(line.split()[:2] == [name, kind] for line in listing.splitlines()), listing
 
 
-def test_crashed_body_is_restarted_and_its_trial_retried(tmp_path):
+def test_crashed_body_is_restarted_by_default_and_its_trial_retried(tmp_path):
     marker = tmp_path / "crashed"
     out = tmp_path / "run"
     done = sfl_run(
@@ -113,20 +117,22 @@ def test_crashed_body_is_restarted_and_its_trial_retried(tmp_path):
         "protocol.trials=20",
         "modules.body.params.crash_at_trial=5",
         f"modules.body.params.crash_marker={marker}",
-        "modules.body.restart=on-failure",
     )
     assert done.returncode == 0, done.stderr
     assert marker.exists()
     assert "module `body` died (exit code 3); restarting" in done.stderr
-    trials = [r for r in read_records(out) if r["kind"] == "trial"]
+    rows = read_records(out)
+    trials = [r for r in rows if r["kind"] == "trial"]
     assert [r["trial"] for r in trials] == list(range(20))  # retried, not counted as a failure
+    assert [(r["trial"], r["attempt"]) for r in rows if r["kind"] == "retry"] == [(5, 1)]  # recorded as retried
     expected = run_local(load(SCENARIOS / "analytic_learn.yaml", ["protocol.trials=20"]))
-    assert stable(read_records(out)) == stable(expected)
+    assert stable([r for r in rows if r["kind"] != "retry"]) == stable(expected)
 
 
 def test_dead_module_without_restart_is_reported_and_records_survive(tmp_path):
     out = tmp_path / "run"
-    done = sfl_run(SCENARIOS / "analytic_learn.yaml", out, "protocol.trials=20", "modules.body.params.crash_at_trial=5")
+    sets = ["protocol.trials=20", "modules.body.params.crash_at_trial=5", "modules.body.restart=never"]
+    done = sfl_run(SCENARIOS / "analytic_learn.yaml", out, *sets)
     assert done.returncode == 1
     assert "module `body`" in done.stderr and "died with exit code 3" in done.stderr
     assert "Traceback" not in done.stderr.split("its log")[0]
@@ -268,7 +274,7 @@ def test_buslink_times_out_when_no_controller_answers():
     session = bus.open_session([bus.free_endpoint()], [])
     link = BusLink(session, "lonely", "body", "controller", timeout=0.3)
     try:
-        with pytest.raises(LinkError, match="no command for tick 0 within 0.3 s"):
+        with pytest.raises(LinkError, match="no answer to tick 0 within 0.3 s"):
             link.step(SensorFrame(trial_id=0, tick=0, values=np.zeros(3)))
     finally:
         link.close()

@@ -47,6 +47,7 @@ def test_kill_9_of_a_brain_module_fails_the_run_naming_it(tmp_path, name):
     assert proc.returncode == 1, stderr
     assert f"module `{name}`" in stderr and "died with exit code -9" in stderr, stderr
     assert f"{name} ready" in stderr  # its log tail
+    assert f"resume: sfl run --resume {out}" in stderr  # the run says how to go on
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "failed"
     rows = read_records(out)
@@ -56,16 +57,16 @@ def test_kill_9_of_a_brain_module_fails_the_run_naming_it(tmp_path, name):
 
 @pytest.mark.parametrize("name", ["controller", "body"])
 def test_kill_9_of_a_body_or_controller_restarts_it_and_retries_the_trial_at_once(tmp_path, name):
-    """The trial in flight is interrupted by the death itself (the supervisor sees the exit, the body
-    sees its controller's token go), not by a time-out: with timeouts.tick = 60 s, nothing waits for
-    a tick or a request to time out, and the retried trial gives the records of a run without the kill."""
+    """Bodies and controllers restart by default. The trial in flight is interrupted by the death itself (the
+    supervisor sees the exit, the body sees its controller's link close), not by a time-out: with timeouts.tick =
+    60 s, nothing waits for a tick or a request to time out; the trial is recorded as retried, and the retried trial
+    gives the records of a run without the kill."""
     out = tmp_path / "run"
     sets = [
         "protocol.trials=20",
         "modules.body.params.duration=3",
         "record.body_every=0",
         "timeouts.tick=60",
-        f"modules.{name}.restart=on-failure",
     ]
     proc = start_sfl_run(WALKER, out, *sets)
     wait_for_trials(out, 2, proc)
@@ -78,5 +79,8 @@ def test_kill_9_of_a_body_or_controller_restarts_it_and_retries_the_trial_at_onc
     for line in retries:  # interrupted by the death, not by a time-out
         assert "no command for tick" not in line and "no reply" not in line, line
     assert "within 60 s" not in (out / "logs" / "body.log").read_text()  # no tick waited out its time-out
+    rows = read_records(out)
+    retried = [r for r in rows if r["kind"] == "retry"]
+    assert len(retried) == 1 and retried[0]["attempt"] == 1 and f"`{name}`" in retried[0]["reason"], retried
     clean = run_local(load(WALKER, sets))
-    assert stable(read_records(out)) == stable(clean)
+    assert stable([r for r in rows if r["kind"] != "retry"]) == stable(clean)

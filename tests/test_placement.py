@@ -96,3 +96,22 @@ def test_a_scenarios_pairs_are_its_body_workers_and_their_controller_processes()
     pairs, _ = lockstep_pairs(load(quick, ["modules.body.workers=2", "modules.controller.colocate=true"]))
     assert pairs == [Pair("body.0", None), Pair("body.1", None)]
     assert lockstep_pairs(load(SCENARIOS / "analytic_learn.yaml"))[0] == [Pair("body", None)]  # no controller
+
+
+def test_auto_puts_the_pair_on_the_least_busy_core_and_no_module_on_a_busy_one():
+    """Another process keeps the last core busy: the pair takes the quiet one, the brain modules are not trapped on
+    the busy one (not pinned); with every core busy, nothing is pinned; ``always`` keeps its fixed order."""
+    busy_last = place(PAIR, BRAIN, [0, 1], "auto", {0: 0.03, 1: 0.97})
+    assert busy_last.of("body") == busy_last.of("controller") == [0] and busy_last.of("acc") is None
+    assert "not pinned (the other cores are kept busy by other work)" in busy_last.reason
+    assert busy_last.reason.endswith("other work on core 0 3%, core 1 97%")
+    four = place(TWO, BRAIN, [0, 1, 2, 3], "auto", {0: 0.0, 1: 0.9, 2: 0.0, 3: 0.8})
+    assert four.of("body.0") == [2] and four.of("body.1") == [0] and four.of("acc") is None
+    everything = place(PAIR, BRAIN, [0, 1], "auto", {0: 0.7, 1: 0.97})
+    assert everything.cores == {} and "other work keeps the cores busy (core 0 70%, core 1 97% of the time)" in (
+        everything.reason
+    )
+    assert place(PAIR, BRAIN, [0, 1], "always", {0: 0.0, 1: 1.0}).of("body") == [1]
+    # quiet cores, or loads within a tenth of each other: as before, the last core
+    assert place(PAIR, BRAIN, [0, 1], "auto", {0: 0.02, 1: 0.04}).of("body") == [1]
+    assert place(PAIR, BRAIN, [0, 1], "auto", {0: 0.0, 1: 0.0}) == place(PAIR, BRAIN, [0, 1], "auto", {0: 0, 1: 0})

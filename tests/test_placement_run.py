@@ -46,16 +46,20 @@ def test_a_run_pins_its_pair_to_one_core_logs_it_and_ticks_on_its_lockstep_link(
     done = sfl_run(QUICK, out, *SETS, f"lockstep.link={link}", preexec_fn=on_all_cores)
     assert done.returncode == 0, done.stderr
     machine = all_cores()
-    expected = place([Pair("body", "controller")], ["acc", "vigilance", "ofc"], machine, "auto")
-    assert f"sfl: {expected.describe()}" in done.stdout.splitlines()  # the line a user sees
     placed = json.loads((out / "logs" / "placement.json").read_text())
+    busy = {int(core): share for core, share in placed["load"].items()}  # what other work kept each core busy with
+    assert (len(busy) == len(machine)) == (len(machine) > 1) and all(0 <= share <= 1 for share in busy.values())
+    expected = place([Pair("body", "controller")], ["acc", "vigilance", "ofc"], machine, "auto", busy)
+    assert f"sfl: {expected.describe()}" in done.stdout.splitlines()  # the line a user sees
     assert placed["cores"] == {name: list(cores) for name, cores in expected.cores.items()}
     assert placed["mode"] == "auto" and placed["usable_cores"] == machine
     text = logs(out)
-    if len(machine) >= 2:  # as the OS says: both on the last usable core, the brain modules elsewhere
-        pair_core = f"pinned to cores [{machine[-1]}]"
+    if expected.cores:  # as the OS says: both on one core (the least busy), the brain modules on quiet others
+        pair_core = f"pinned to cores {expected.of('body')}"
         assert pair_core in text["body"] and pair_core in text["controller"]
-        assert f"pinned to cores {machine[:-1]}" in text["acc"]
+        assert expected.of("body") == expected.of("controller") and len(expected.of("body")) == 1
+        if expected.of("acc"):
+            assert f"pinned to cores {expected.of('acc')}" in text["acc"]
     # the frames and commands went over the pair's own link: the controller listens, the body connects
     endpoint = placed["lockstep_links"]["controller"]["listen"][0]
     scheme, kind = {"socket": ("seqpacket/", "socket"), "zenoh": ("unixsock-stream/", "lowlatency")}[link]
@@ -78,6 +82,64 @@ def test_a_run_limited_to_one_core_by_taskset_pins_nothing(tmp_path):
     assert line in done.stdout.splitlines()
     assert all("pinned to cores" not in text for text in logs(out).values())
     assert json.loads((out / "logs" / "placement.json").read_text())["cores"] == {}
+
+
+@pytest.mark.skipif(len(all_cores()) < 2, reason="one core: nothing is pinned")
+def test_a_pairs_core_that_other_work_comes_to_keep_busy_makes_the_placement_yield(tmp_path):
+    """The supervisor's look at the cores (``Supervisor._yield_cores``, every RECHECK_S s) with real processes: a
+    body and a controller pinned to one core, and a process that comes to spin there. The placement yields: a new
+    placement on the load measured (the pair on a quiet core, or nothing pinned), every process moved as it says,
+    the user told, placement.json keeping the first placement under ``earlier``."""
+    import subprocess
+    import sys
+
+    import psutil
+
+    from sfl_brain.events import PlacementYielded
+    from sfl_brain.placement import Placement
+    from sfl_brain.processes import Child
+    from sfl_brain.runtime import Supervisor
+
+    from .conftest import poll_until
+
+    plan = load(QUICK, list(SETS))
+    cores = all_cores()
+    sup = Supervisor(plan, tmp_path, "yield")
+    (tmp_path / "logs").mkdir()
+    pair = (cores[-1],)
+    rest = tuple(cores[:-1])
+    placed = {"body": pair, "controller": pair, "acc": rest, "vigilance": rest, "ofc": rest}
+    sup.placement = Placement("auto", tuple(cores), placed, "body and controller share the last core")
+    sup._write_placement()
+    told = []
+    sup.events.subscribe(PlacementYielded, told.append)
+    sleeper = [sys.executable, "-c", "import time; time.sleep(600)"]
+    procs = []
+    try:
+        for inst in plan.instances:
+            proc = subprocess.Popen(sleeper, preexec_fn=lambda c=placed[inst.name]: os.sched_setaffinity(0, c))
+            procs.append(proc)
+            sup.children[inst.name] = Child(inst, tmp_path / f"{inst.name}.log", proc=proc, alive=True)
+        spin = subprocess.Popen(
+            [sys.executable, "-c", "while True: pass"], preexec_fn=lambda: os.sched_setaffinity(0, set(pair))
+        )
+        procs.append(spin)
+        sup._yield_cores()  # the first look starts the measurement
+        poll_until(lambda: (sup._yield_cores(), told)[1], "the placement to yield", timeout=60)
+        # every process where the new placement says (the pair on a quiet core, or on every core)
+        moved = {name: psutil.Process(child.proc.pid).cpu_affinity() for name, child in sup.children.items()}
+    finally:
+        for proc in procs:
+            proc.kill()
+            proc.wait()
+    (event,) = told
+    assert event.busy.startswith(f"core {pair[0]} ") and event.placement == sup.placement.describe()
+    assert sup.placement.of("body") != list(pair) and sup.placement.of("body") == sup.placement.of("controller")
+    assert moved == {name: sup.placement.of(name) or cores for name in sup.children}
+    assert moved["body"] != list(pair)
+    written = json.loads((tmp_path / "logs" / "placement.json").read_text())
+    assert written["earlier"][0]["cores"] == {name: list(c) for name, c in placed.items()}
+    assert written["cores"] == {name: list(c) for name, c in sup.placement.cores.items()}
 
 
 def test_on_its_link_the_body_takes_only_its_trials_command_and_counts_the_rest(tmp_path):

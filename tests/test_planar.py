@@ -265,37 +265,43 @@ def test_a_controller_step_may_return_a_list_and_still_sends_a_float64_vector():
     np.testing.assert_array_equal(command.values, [1.0, 2.5])
 
 
-SLOW_ONCE = '''
-import time
+HUNG_ONCE = '''
+from pathlib import Path
 
 from sfl_brain.modules.controllers.reflex import ReflexController
 
 
-class SlowOnce(ReflexController):
-    """The reflex controller, but it hangs for 2 s on one tick, once per process."""
-
-    hung = False
+class HungOnce(ReflexController):
+    """The reflex controller, but it spins on one tick, once in the run (a marker file beside this one)."""
 
     def configure(self, params, seed):
         self._ticks = 0
         super().configure(params, seed)
 
     def step(self, sensors):
-        if self._ticks == 50 and not SlowOnce.hung:
-            SlowOnce.hung = True
-            time.sleep(2.0)
+        marker = Path(__file__).with_suffix(".hung")
+        if self._ticks == 50 and not marker.exists():
+            marker.write_text("hung")
+            while True:
+                pass
         self._ticks += 1
         return super().step(sensors)
 '''
 
 
-def test_a_controller_that_hangs_past_the_tick_timeout_interrupts_the_trial_which_is_retried(tmp_path):
-    (tmp_path / "slow_once.py").write_text(SLOW_ONCE)
+def test_a_controller_that_spins_in_a_tick_is_found_hung_by_its_body_restarted_and_the_trial_retried(tmp_path):
+    """The body's watchdog finds its controller hung (it could run for timeouts.tick and did not answer), the
+    supervisor kills it and restarts it (the default for controllers), and the trial is retried and recorded as
+    retried; the records are otherwise those of a controller that never hangs."""
+    (tmp_path / "hung_once.py").write_text(HUNG_ONCE)
     sets = ["protocol.trials=4", "record.body_every=0"]
-    slow = [*sets, f"modules.controller.impl={tmp_path / 'slow_once.py'}:SlowOnce", "timeouts.tick=1"]
+    hung = [*sets, f"modules.controller.impl={tmp_path / 'hung_once.py'}:HungOnce", "timeouts.tick=1"]
     out = tmp_path / "run"
-    done = sfl_run(SCENARIOS / "quickstart.yaml", out, *slow)
+    done = sfl_run(SCENARIOS / "quickstart.yaml", out, *hung)
     assert done.returncode == 0, done.stderr
-    assert "trial 0 interrupted" in done.stdout and "no command for tick 50 within 1 s" in done.stdout, done.stdout
-    # the retried trial is the trial a controller that never hangs gives
-    assert stable(run_local(load(SCENARIOS / "quickstart.yaml", sets))) == stable(read_records(out))
+    assert "trial 0 interrupted" in done.stdout and "did not answer tick 50 (timeouts.tick 1 s): hung" in done.stdout
+    assert "module `controller` was hung" in done.stderr and "killed; restarting (1/3)" in done.stderr, done.stderr
+    rows = read_records(out)
+    assert [(r["trial"], r["attempt"]) for r in rows if r["kind"] == "retry"] == [(0, 1)]
+    clean = run_local(load(SCENARIOS / "quickstart.yaml", sets))
+    assert stable(clean) == stable([r for r in rows if r["kind"] != "retry"])

@@ -121,6 +121,7 @@ def switch_run(tmp_path_factory):
                 condition[key] = learnt[value.partition(".")[2]] * (1.1 if key.startswith("controller.next_") else 1)
         conditions[name] = condition
     conditions["up_switching"]["controller.switch_band"] = 0.5
+    conditions["up_switching"]["controller.switch_detector"] = "torso"  # the thesis's detector, drawn over the pitch
     protocol.update(conditions=conditions, repeats=1, compare=[["up_without", "up_switching"]], analyses=[])
     raw["modules"]["body"]["params"]["duration"] = 8.0
     raw["modules"]["body"]["workers"] = 1
@@ -162,3 +163,19 @@ def test_the_terrain_switch_threshold_and_the_switch_are_drawn_over_the_torso_pi
     assert {"/body/torso/pitch", f"/{band}band_low", "/controller/events/**"} <= contents(
         blueprint(**layout).root_container
     )
+
+
+def test_the_sensed_slope_and_each_ankles_centre_are_drawn_beside_the_torso_pitch(switch_run):
+    """Issue 29: with the ankle adaptation on (chapter 5's setting), every logged walk has each foot's sensed slope and
+    each ankle's centre shift on sim_time (deg), from its start to its end, in the humanoid layout's terrain panel."""
+    names = [f"controller/terrain/{kind}_{foot}" for kind in ("slope", "ankle_centre") for foot in "lr"]
+    series = read_series(switch_run / "recording.rrd", names + ["body/torso/pitch"])
+    for row in trial_rows(switch_run):
+        pitch = series["body/torso/pitch"][row["trial"]]
+        for name in names:
+            trace = series[name][row["trial"]]
+            assert trace.times[0] == pytest.approx(pitch.times[0], abs=0.05)
+            assert trace.times[-1] == pytest.approx(pitch.times[-1], abs=0.05)
+            assert np.all(np.abs(trace.values) < 5.0)  # deg: 1 m of flat ground, then the ramp's first steps
+    shown = contents(blueprint(**layout_of(load(switch_run / "scenario.yaml"))).root_container)
+    assert {f"/{name}" for name in names} | {"/controller/terrain/switch"} <= shown

@@ -243,8 +243,17 @@ def test_strict_types_keep_what_is_right(write_scenario):
         load(write_scenario(merged))
 
 
-def test_restart_on_failure_is_accepted_for_bodies_and_controllers_only(write_scenario):
+def test_restart_on_failure_is_accepted_for_bodies_and_controllers_only_and_is_their_default(write_scenario):
     quick = SCENARIOS / "quickstart.yaml"
+    defaults = {i.spec_name: i.restart for i in load(quick).instances}
+    assert defaults == {
+        "acc": "never",
+        "vigilance": "never",
+        "ofc": "never",
+        "controller": "on-failure",
+        "body": "on-failure",
+    }
+    assert {i.spec_name: i.restart for i in load(quick, ["modules.body.restart=never"]).instances}["body"] == "never"
     plan = load(quick, ["modules.body.restart=on-failure", "modules.controller.restart=on-failure"])
     assert {i.spec_name: i.restart for i in plan.instances} == {
         "acc": "never",

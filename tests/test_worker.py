@@ -71,3 +71,17 @@ def test_worker_wrong_run_id_gives_up_and_ctrl_c_stops_a_waiting_worker(tmp_path
         assert joined.wait(timeout=30) == 130
         run.proc.kill()
         run.proc.wait(timeout=30)
+
+
+def test_a_workers_lease_is_timeouts_lease_and_the_runs_own_processes_hold_a_day():
+    """A worker on another machine cannot be seen, only heard: the run gives it up after its lease
+    (``timeouts.lease``); the run's own processes declare a lease of a day, and are judged by their progress."""
+    from sfl_brain.runtime import Supervisor
+    from sfl_brain.scenario import load
+    from sfl_brain.worker import worker_spec
+
+    plan = load(LEARN, ["timeouts.lease=1.5"])
+    assert worker_spec(plan, "run", "ext0", ["tcp/127.0.0.1:7447"], "secret")["lease_ms"] == 1500
+    assert bus.config(lease_ms=1500).get_json("transport/link/tx/lease") == "1500"
+    own = Supervisor(plan, ROOT / "runs", "run").spec_for(plan.instances[0])
+    assert own["lease_ms"] == bus.LOCAL_LEASE_MS == 24 * 3600 * 1000

@@ -4,10 +4,12 @@
 # into docs/results/chapter4/:
 #   the default gait over 10 starts (scenarios/humanoid_gait.yaml)
 #   E4.5  250-s walks and the Poincare return map of the torso pitch (e4_5_poincare.yaml)
-#   E4.6  walking onto an 11-degree slope around the thesis's alpha_MLR, theta_MLR, sigma_s swept (e4_6_uphill.yaml)
-#   E4.7  pushes of 0-34 N at 10 phases of the gait with and without L1437's switch (e4_7_push.yaml), and a real ball
-#         (e4_7_ball.yaml)
-# A run folder that already holds a completed run is kept (re-running resumes). About 45 minutes on 2 cores.
+#   E4.6  walking from the flat onto an 11-degree slope around the thesis's alpha_MLR, theta_MLR, with and without the
+#         ankle adaptation (e4_6_uphill.yaml), seeds 0, 1, 2
+#   E4.7  pushes of 0-34 N at 10 phases of the gait with and without L1437's switch (e4_7_push.yaml), a real ball
+#         (e4_7_ball.yaml), and the same pushes on a body of the thesis's 4.3 kg (e4_7_push_43kg.yaml, seeds 0-2)
+#   the flat gait's margin: the largest push it survives at 10 phases of its cycle (humanoid_margin.yaml, seeds 0-2)
+# A run folder that already holds a completed run is kept (re-running resumes). About 90 minutes on 2 cores.
 #   bash docs/experiments/chapter4_humanoid.sh
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -17,7 +19,13 @@ mkdir -p "$OUT" "$RESULTS"
 
 source docs/experiments/_once.sh  # once DIR COMMAND...: a completed run folder is kept
 
-for name in humanoid_gait e4_5_poincare e4_6_uphill e4_7_push e4_7_ball; do
+for name in humanoid_gait e4_5_poincare e4_7_push e4_7_ball; do
   once "$OUT/$name" sfl run "scenarios/$name.yaml"
   sfl report "$OUT/$name" --out "$RESULTS"
+done
+for name in humanoid_margin e4_7_push_43kg e4_6_uphill; do  # seeds 0, 1, 2, pooled on one page
+  for seed in 0 1 2; do
+    once "$OUT/${name}_s$seed" sfl run "scenarios/$name.yaml" --set seed=$seed
+  done
+  sfl report "$OUT/${name}"_s0 "$OUT/${name}"_s1 "$OUT/${name}"_s2 --out "$RESULTS"
 done

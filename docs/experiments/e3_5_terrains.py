@@ -42,6 +42,7 @@ from sfl_brain.body import InProcessLink  # noqa: E402
 from sfl_brain.messages import TrialRequest  # noqa: E402
 from sfl_brain.modules.acc import ACC  # noqa: E402
 from sfl_brain.modules.controllers.reflex import ReflexController  # noqa: E402
+from sfl_brain.provenance import made_here  # noqa: E402
 from sfl_brain.records import read_records  # noqa: E402
 
 
@@ -122,6 +123,8 @@ def main() -> None:
     best = np.argsort(-per_setting, kind="stable")[:5]
     lines = [
         "# E3.5 over random terrains: switching against every fixed (alpha, theta)",
+        "",
+        made_here(),
         "",
         f"`python docs/experiments/e3_5_terrains.py --terrains {args.terrains} --maps {args.maps}` (rules in its "
         "docstring: pieces of 1-2.5 m, slopes -10..+5 deg, 7.5 m in 15 s to succeed; switching table from that "

@@ -50,6 +50,7 @@ from sfl_brain.modules.cpg.patterns import (  # noqa: E402
     log_energy,
     simulate_one_joint,
 )
+from sfl_brain.provenance import made_here  # noqa: E402
 
 DT = 0.01
 MARKER = {PLATEAU: "x", QUIESCENT: "*", ALMOST_OSCILLATOR: "+", OSCILLATOR: "o"}  # as Fig. 4.5
@@ -337,6 +338,8 @@ def main() -> None:
     # the table
     lines = [
         "# E4.1: patterns of one joint (thesis Figs. 4.5, 4.6)",
+        "",
+        made_here(),
         "",
         f"`python docs/experiments/e4_1_patterns.py` ({args.step:g} grid over [0, 5]^2, {args.seconds:g} s per"
         f" point, kick +1 / -1 for 80 ms; {time.perf_counter() - started:.0f} s in all).",

@@ -92,9 +92,10 @@ from sfl_brain.module import ModuleParams
 from sfl_brain.modules.cpg import CPGNetwork
 from sfl_brain.modules.cpg.circuit import Circuit, apply_overrides, circuit_path, read_circuit_data, validate_circuit
 from sfl_brain.modules.cpg.patterns import PATTERN_POINTS
+from sfl_brain.modules.cpg.terrain import DETECTORS
 from sfl_brain.registry import nearest
 from sfl_brain.scenario import ScenarioError
-from sfl_brain.telemetry import Event, series
+from sfl_brain.telemetry import Event, rates_of, series
 
 #: what a trial may set (see the module docstring)
 TRIAL_PARAMS = (
@@ -117,6 +118,9 @@ TRIAL_PARAMS = (
     "next_sigma_s",
     "next_theta_mlr",
     "start_slope_deg",
+    "ankle_adaptation",
+    "start_ramp",
+    "switch_detector",
 )
 #: the group gain multipliers a trial may set (ch. 5's w1, w2): trial parameter -> the circuit's gain group
 GAIN_PARAMS = {"gain_pitch": "pitch", "gain_roll": "roll", "next_gain_pitch": "pitch", "next_gain_roll": "roll"}
@@ -125,6 +129,9 @@ TERRAIN_SWITCH_MODES = ("off", *CPGNetwork.TERRAIN_SWITCH_MODES)
 TERRAIN_SWITCH_WHEN = CPGNetwork.TERRAIN_SWITCH_WHEN
 #: how the circuit's phase resets act (``phase_reset``, module and trial parameter)
 PHASE_RESET_MODES = CPGNetwork.PHASE_RESET_MODES
+#: what a terrain switch may watch (``switch_detector``; ``terrain_watch``), modules/cpg/terrain.py
+SWITCH_DETECTORS = DETECTORS
+ON_OFF = ("on", "off")
 
 
 class PatternPoint(ModuleParams):
@@ -254,6 +261,12 @@ class CPGParams(ModuleParams):
         description="s over which a gradual terrain switch moves the parameters: one cycle of the flat gait (§7.17; "
         "the shipped humanoid gait's period is 0.667 s, 1.5 Hz)",
     )
+    terrain_watch: list[Literal[DETECTORS]] = Field(  # type: ignore[valid-type]
+        [],
+        description="detectors watched on every trial without switching (their bands measured as switch_band's, "
+        "watch_band wide): when each would have fired is an event on logged trials (issue 29's comparison)",
+    )
+    watch_band: float = Field(1.5, ge=0, description="k of the watched detectors' bands: mean +- k x half range")
 
     @field_validator("phase_reset", mode="before")
     @classmethod
@@ -383,6 +396,8 @@ class CPGController(Controller):
         self.preset_index = {s.name: i for i, s in enumerate(self.circuit.switches) if not s.armed and s.name}
         self._control_dt = 0.01
         self._event_log: tuple[int, float] | None = None  # (trial, t0) of a logged trial
+        self._terrain_log: list | None = None  # a logged trial's (t, slope estimates, ankle centres) (issue 29)
+        self._terrain_every = 1  # ticks between two of its samples
         super().__init__(params, seed=seed)
 
     @classmethod
@@ -396,7 +411,7 @@ class CPGController(Controller):
         """Raise ValueError if ``value`` cannot be trial parameter ``name`` (``sfl check`` calls this). Without
         ``params`` the type and the allowed strings are checked; with the module's ``params`` also what depends on
         them: that a ``switch`` preset exists, that the circuit's phase resets store states for "state"."""
-        needs_circuit = name in ("phase_reset", "posture_gain", "terrain_switch", *GAIN_PARAMS)
+        needs_circuit = name in ("phase_reset", "posture_gain", "terrain_switch", "ankle_adaptation", *GAIN_PARAMS)
         circuit = params.build_circuit() if params is not None and needs_circuit else None
         presets = list(params.switches) if params is not None else None
         _check_trial_value(name, value, circuit, presets, params.watched_input if params is not None else None)
@@ -431,6 +446,10 @@ class CPGController(Controller):
             network.set_switch_time(float(params["switch_at"]))
         if "start_slope_deg" in params:  # circuit start_slope: the start pose shifted by the slope it starts on
             network.set_start_slope(math.radians(float(params["start_slope_deg"])))
+        if "ankle_adaptation" in params:  # each ankle's centre follows the sensed slope (issue 29)
+            network.set_ankle_adaptation(params["ankle_adaptation"] in ("on", True))
+        if "start_ramp" in params:  # alpha_MLR grows from 0 over the trial's first seconds
+            network.set_start_ramp(float(params["start_ramp"]))
         for name in ("gain_pitch", "gain_roll"):  # ch. 5's w1, w2 (L1631): multipliers of the groups' gains
             if name in params:
                 network.set_gain_multiplier(GAIN_PARAMS[name], float(params[name]))
@@ -442,7 +461,7 @@ class CPGController(Controller):
             network.arm_terrain_switch(
                 p.watched_input,
                 float(params["switch_threshold"]) if "switch_threshold" in params else None,
-                params["switch_when"],
+                params.get("switch_when", "outside"),
                 mode=mode,
                 seconds=p.switch_seconds,
                 after=p.terrain_switch_after,
@@ -451,11 +470,23 @@ class CPGController(Controller):
                 theta_mlr=float(params["next_theta_mlr"]) if "next_theta_mlr" in params else None,
                 sigma_joints=self._pattern_joints,
                 band=(float(params["switch_band"]), p.switch_measure) if "switch_band" in params else None,
+                detector=params.get("switch_detector", "torso"),
             )
+        if self.params.terrain_watch:  # detectors watched without switching (issue 29)
+            p = self.params
+            network.watch_terrain(
+                p.terrain_watch, (p.watch_band, p.switch_measure), p.terrain_switch_after, p.watched_input
+            )
+        self._terrain_log = [] if log and network.ankle_adaptation else None
+        every = rates_of(self.telemetry).signal_every(self._control_dt) if log else 1
+        self._terrain_every = every
 
     def step(self, sensors: np.ndarray) -> np.ndarray:
-        self.network.advance(sensors, self._control_dt, self.params.substeps)
-        return self.network.command()
+        network = self.network
+        network.advance(sensors, self._control_dt, self.params.substeps)
+        if self._terrain_log is not None and network.tick % self._terrain_every == 1 % self._terrain_every:
+            self._terrain_log.append((network.time, network.slope_estimate_all()[0], network.ankle_centre_all()[0]))
+        return network.command()
 
     def neurons(self) -> np.ndarray:
         return self.network.neuron_values()
@@ -471,44 +502,87 @@ class CPGController(Controller):
                 self.telemetry.emit(
                     Event("events/terrain_switch", trial_id, t0 + event.time, terrain_switch_text(event))
                 )
+            for event in self.network.detector_events:
+                self.telemetry.emit(Event("events/detector", trial_id, t0 + event.time, detector_text(event)))
             self._log_terrain_switch(trial_id, t0)
+            self._log_terrain(trial_id, t0)
         super().flush_neurons()
+
+    def _log_terrain(self, trial_id: int, t0: float) -> None:
+        """A logged trial's ankle adaptation (issue 29) as series in degrees: each foot's slope estimate
+        (``terrain/slope_<foot>``) and its ankle's centre shift (``terrain/ankle_centre_<foot>``), at the signal rate;
+        and the terrain switch's largest command change per tick while it moves (``terrain_switch/command_jump``,
+        rad)."""
+        rows, self._terrain_log = self._terrain_log, None
+        network = self.network
+        if rows:
+            times = t0 + np.array([r[0] for r in rows])
+            slopes, centres = np.array([r[1] for r in rows]), np.array([r[2] for r in rows])
+            for f, joint in enumerate(network.circuit.ankle_adaptation.feet):
+                foot = joint.rpartition("_")[2]
+                self.telemetry.emit(series(f"terrain/slope_{foot}", trial_id, times, np.degrees(slopes[:, f]), "deg"))
+                self.telemetry.emit(
+                    series(f"terrain/ankle_centre_{foot}", trial_id, times, np.degrees(centres[:, f]), "deg")
+                )
+        jumps = network.terrain_switch_jumps
+        if jumps:
+            self.telemetry.emit(
+                series(
+                    "terrain_switch/command_jump",
+                    trial_id,
+                    t0 + np.array([j[0] for j in jumps]),
+                    np.array([j[1] for j in jumps]),
+                    "rad",
+                    color=self.SWITCH_COLOUR,
+                    points=True,
+                )
+            )
 
     #: the terrain switch's threshold and switch as series beside the body's torso pitch (deg), orange
     SWITCH_COLOUR = (240, 140, 20)
     BAND_STEP = 0.1  # s between two of the threshold's markers
 
     def _log_terrain_switch(self, trial_id: int, t0: float) -> None:
-        """A logged trial's terrain switch (§5.8) as series in degrees, to be drawn over the body's ``torso/pitch``:
-        ``terrain_switch/band_low`` and ``band_high`` (the threshold, given or measured, from when it is known to the
-        trial's end, a marker every ``BAND_STEP`` s; one of them for "below" or "above") and ``terrain_switch/at`` (a
-        marker at the switch, at the watched input's value then)."""
+        """A logged trial's terrain switch (§5.8) as series in degrees: the band its detector watches, from when it is
+        known to the trial's end (a marker every ``BAND_STEP`` s; one edge for "below" or "above"), drawn where its
+        signal is: over the body's ``torso/pitch`` for the torso detector (``terrain_switch/band_low``, ``band_high``),
+        over the sensed slope for the foot_slope detector (``terrain/band_low``, ``band_high``; the other detectors'
+        bands are in their events); and the switch, a marker at the torso pitch then (``terrain_switch/at``) and, for
+        foot_slope, at the sensed slope that left the band (``terrain/switch``)."""
         known = self.network.terrain_threshold
         if known is None:
             return
+        fired = [e for e in self.network.terrain_switch_events if e.copies[0]]
+        detector = self.network.terrain_detector
+        where = {"torso": "terrain_switch", "foot_slope": "terrain"}.get(detector)
         # dotted (a marker every BAND_STEP s), so that one trial's band is not joined to the next logged trial's
         span = t0 + np.arange(known.since, max(known.since, self.network.time) + 1e-9, self.BAND_STEP)
         for name, edge in (("band_low", known.low), ("band_high", known.high)):
-            if np.isfinite(edge[0]):
+            if where is not None and np.isfinite(edge[0]):
                 value = np.full(len(span), math.degrees(float(edge[0])))
                 self.telemetry.emit(
-                    series(
-                        f"terrain_switch/{name}", trial_id, span, value, "deg", color=self.SWITCH_COLOUR, points=True
-                    )
+                    series(f"{where}/{name}", trial_id, span, value, "deg", color=self.SWITCH_COLOUR, points=True)
                 )
-        fired = [e for e in self.network.terrain_switch_events if e.copies[0]]
-        if fired:
-            self.telemetry.emit(
-                series(
-                    "terrain_switch/at",
-                    trial_id,
-                    [t0 + fired[0].time],
-                    [math.degrees(float(np.ravel(fired[0].value)[0]))],
-                    "deg",
-                    color=self.SWITCH_COLOUR,
-                    points=True,
-                )
+        if not fired:
+            return
+        event = fired[0]
+        at = [t0 + event.time]
+        torso = event.value if event.detector == "torso" else event.torso
+        self.telemetry.emit(
+            series(
+                "terrain_switch/at",
+                trial_id,
+                at,
+                [math.degrees(float(np.ravel(torso)[0]))],
+                "deg",
+                color=self.SWITCH_COLOUR,
+                points=True,
             )
+        )
+        if event.detector == "foot_slope":
+            value = [math.degrees(float(np.ravel(event.value)[0]))]
+            colour = self.SWITCH_COLOUR
+            self.telemetry.emit(series("terrain/switch", trial_id, at, value, "deg", color=colour, points=True))
 
 
 def _check_trial_value(
@@ -537,6 +611,28 @@ def _check_trial_value(
         lacking = circuit.state_reset_problem() if circuit is not None and value == "state" else ""
         if lacking:
             raise ValueError(f"phase_reset: {lacking}")
+        return
+    if name == "ankle_adaptation":
+        if isinstance(value, bool):  # YAML's bare on / off
+            value = "on" if value else "off"
+        if not isinstance(value, str) or value not in ON_OFF:
+            hint = nearest(value, ON_OFF) if isinstance(value, str) else None
+            tail = f" (did you mean {hint!r}?)" if hint else ""
+            raise ValueError(f"ankle_adaptation: expected one of {list(ON_OFF)}; got {value!r}{tail}")
+        if value == "on" and circuit is not None and circuit.ankle_adaptation is None:
+            raise ValueError(
+                f"ankle_adaptation: expected circuit {circuit.name} to have one (circuit key ankle_adaptation)"
+            )
+        return
+    if name == "switch_detector":
+        if not isinstance(value, str) or value not in SWITCH_DETECTORS:
+            hint = nearest(value, SWITCH_DETECTORS) if isinstance(value, str) else None
+            tail = f" (did you mean {hint!r}?)" if hint else ""
+            raise ValueError(f"switch_detector: expected one of {list(SWITCH_DETECTORS)}; got {value!r}{tail}")
+        return
+    if name == "start_ramp":
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or value < 0:
+            raise ValueError(f"start_ramp: expected a time in s >= 0; got {value!r}")
         return
     if name == "start_slope_deg":
         if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or abs(value) > 45:
@@ -580,15 +676,26 @@ def _check_trial_value(
 
 def _check_terrain_switch(params: dict) -> None:
     """What a terrain switch needs besides each value's own check (``configure``; one value alone cannot say)."""
+    if params.get("ankle_adaptation") in ("on", True) and "start_slope_deg" in params:
+        raise ValueError(
+            "start_slope_deg: expected none with ankle_adaptation 'on' (the adaptation senses the slope the trial "
+            "starts on); got both"
+        )
     mode = params.get("terrain_switch", "off")
     if mode == "off":
         return
-    if ("switch_threshold" in params) == ("switch_band" in params):
+    detector = params.get("switch_detector", "torso")
+    if detector == "time":  # no threshold: the switch fires at terrain_switch_after
+        if "switch_threshold" in params or "switch_band" in params:
+            raise ValueError("switch_detector 'time': expected no switch_threshold or switch_band (it senses nothing)")
+    elif detector != "torso" and "switch_band" not in params:
+        raise ValueError(f"switch_detector {detector!r}: expected switch_band (its band measured on the walk)")
+    elif ("switch_threshold" in params) == ("switch_band" in params):
         raise ValueError(
             f"terrain_switch {mode!r}: expected one of switch_threshold (rad) or switch_band (the threshold measured "
             "on the walk: mean +- switch_band x half range, digest §7.17)"
         )
-    if "switch_when" not in params:
+    if "switch_when" not in params and detector != "time":
         raise ValueError(f"terrain_switch {mode!r}: expected the trial parameter switch_when too; got none")
     if not any(k in params for k in ("next_gain_pitch", "next_gain_roll", "next_sigma_s", "next_theta_mlr")):
         raise ValueError(
@@ -605,12 +712,25 @@ def terrain_switch_text(event) -> str:
 
     how = "at once" if event.mode == "at_once" else f"gradually over {event.seconds:g} s"
     moves = ", ".join(f"{name} {number(event.old[name])} -> {number(new)}" for name, new in event.new.items())
+    detector = getattr(event, "detector", "torso")
+    if detector == "time":  # nothing sensed: the switch at its time
+        return f"terrain switch ({how}): at {event.time:g} s (switch_detector time); {moves}"
     if event.when == "outside":  # the band (low, high) it left
         band = f"[{number(event.threshold[0])}, {number(event.threshold[1])}]"
     else:
         band = number(event.threshold)
-    where = f"{event.input} {number(event.value)} rad {event.when} {band}"
+    signal = event.input if detector == "torso" else detector
+    where = f"{signal} {number(event.value)} rad {event.when} {band}"
     return f"terrain switch ({how}): {where}; {moves}"
+
+
+def detector_text(event) -> str:
+    """One line saying when a watched detector fired (issue 29)."""
+
+    def number(value) -> str:
+        return f"{value:.4g}" if np.ndim(value) == 0 else "[" + ", ".join(f"{v:.4g}" for v in np.ravel(value)) + "]"
+
+    return f"detector {event.detector}: {number(event.value)} outside [{number(event.low)}, {number(event.high)}]"
 
 
 def switch_text(event) -> str:

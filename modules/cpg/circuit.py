@@ -39,8 +39,13 @@ Layout of a file (see ``circuits/*.yaml``; CPG-HUMANOID.md is "the digest" below
     gain_groups: {pitch: [hip_pitch_l, ...], roll: [hip_roll_l, ...]}   # ch. 5's learnt MN gains (w1, w2, L1631): a
                                        # trial's gain_pitch / gain_roll multiply the G of every joint of the group
     posture: {input: torso_pitch, target: 0.1745, gain: 0.1, joints: {ankle_pitch_l: 1, ankle_pitch_r: 1},
-              limit: 0.15}             # position circuits: the torso held near target (L1764): a slow integral
+              limit: 0.15, window: 0.667, relative_sensors: [FB, FF]}
+                                       # position circuits: the torso held near target (L1764): a slow integral
                                        # term on the joints' theta_0, d theta_0 / dt = gain sign (input - target)
+    ankle_adaptation: {pitch_input: torso_pitch, feet: {ankle_pitch_l: {heel: GB_l, toe: GF_l, chain: [...]}, ...},
+                       rate: .., per_slope_up: .., per_slope_down: .., speed: .., limit: ..}
+                                       # position circuits: each ankle's centre follows the slope under its foot
+    start_ramp: 2.0                    # s: alpha_MLR grows from 0 over a trial's first seconds
 
 Current pulses (kicks, phase resets, switch kicks) follow the author's code sign convention (digest
 §5): ``amplitude`` is the current injected into the flexor RG, the extensor RG receives its negative.
@@ -251,6 +256,52 @@ class Posture(Strict):
     gain: NonNegative  # 1/s
     joints: dict[Name, Literal[-1, 1]] = Field(min_length=1)  # joint -> the sign of its shift per rad of lean
     limit: Positive  # rad
+    # s: the input averaged over this window (one gait cycle: the gait's own swing of the torso averages out, issue
+    # 29) before it is compared with the target; 0: the raw input, as before
+    window: NonNegative = 0.0
+    # sensory neurons whose threshold is moved by ``target`` while the term is on (the fall sensors FB/FF, L1347: a
+    # fall back or forward from the held lean, not from the vertical; their thresholds at +-0.1 rad would otherwise sit
+    # inside the swing about 10 deg and saturate, issue 29)
+    relative_sensors: list[Name] = []
+
+
+class FootSense(Strict):
+    """How one foot senses the ground under it (``AnkleAdaptation``): its heel and toe contact neurons (GB, GF,
+    L1345) and the inputs whose sum with the adaptation's ``pitch_input`` is the sole's pitch in the world (rad, about
+    the pitch axis: the torso's pitch plus the leg's pitch joints, all turning about the same axis)."""
+
+    heel: Name  # a sensory neuron (GB)
+    toe: Name  # a sensory neuron (GF)
+    chain: list[Name] = Field(min_length=1)  # inputs, rad
+
+
+class AnkleAdaptation(Strict):
+    """Each ankle's centre of oscillation follows the slope sensed under its own foot (issue 29; L1417: "adjust the
+    center of oscillation of each joint" to switch from flat to sloped terrain; L1737: on a slope the ankle pitch is set
+    from the stance; L1764: the inertial sensor adjusts the centre of oscillation of the ankles). Every control tick:
+
+        flat stance of foot f (heel and toe neurons >= stance):  g_f = -(pitch_input + sum(chain_f))   (the ground's
+            slope under the sole, rad, + = uphill)
+                                                            s_f += (g_f - s_f) min(1, rate dt)
+        a foot not in flat stance aims at the ground last sensed in flat stance (by either foot: it lands where the
+        other stands); the aimed slope is clipped to +-limit;
+        centre_f -> per_slope_up s (s > 0) or per_slope_down s (s < 0), at most ``speed`` rad/s;   theta_0,f += the
+        change of centre_f.
+
+    At the trial's first tick s_f is the sole's pitch the start pose shows (a ramp start: the ankles take the slope at
+    once), so a gait started on a ramp and the same gait reached by walking onto it have the same ankle centres by
+    construction. The thesis gives no values: each is chosen or calibrated in the circuit file."""
+
+    pitch_input: Name  # the torso's pitch to the vertical, rad, + = forward (the inertial sensor, L1759)
+    feet: dict[Name, FootSense] = Field(min_length=1)  # ankle pitch joint -> its foot
+    stance: Number = 0.5  # both contact neurons at or above: the sole flat on the ground (GB/GF > 0.9 in stance, L1345)
+    rate: Positive  # 1/s
+    per_slope_up: Number  # rad of centre per rad of uphill slope
+    per_slope_down: Number  # rad of centre per rad of downhill slope
+    speed: Positive  # rad/s
+    limit: Positive  # rad: the steepest slope followed
+    share: bool = True  # a foot not lying flat aims at the ground last sensed by a foot lying flat
+    enabled: bool = False  # on unless a trial says (trial parameter ankle_adaptation)
 
 
 class Circuit(Strict):
@@ -289,6 +340,12 @@ class Circuit(Strict):
     gain_groups: dict[Literal["pitch", "roll"], list[Name]] = {}
     # position circuits: the torso held near an angle by the joints' offsets (L1764, digest §7.18; ``Posture``)
     posture: Posture | None = None
+    # position circuits: the ankles' centres follow the slope the feet sense (issue 29; ``AnkleAdaptation``)
+    ankle_adaptation: AnkleAdaptation | None = None
+    # s: the descending slope alpha_MLR (4.9) grows linearly from 0 to its value over a trial's first seconds (the
+    # oscillation's amplitude with it, L1419): the walk starts gradually rather than at full amplitude from the kicks.
+    # 0: at once (as before). Chosen here (issue 29), not in the thesis
+    start_ramp: NonNegative = 0.0
 
     def joint_index(self, name: str) -> int:
         return [j.name for j in self.joints].index(name)
@@ -474,6 +531,19 @@ def _reference_problems(c: Circuit) -> list[Problem]:
         need("posture.input", c.posture.input, c.inputs, "inputs")
         for name in c.posture.joints:
             need(f"posture.joints.{name}", name, joints, "joints")
+        for n, name in enumerate(c.posture.relative_sensors):
+            need(f"posture.relative_sensors.{n}", name, sensors, "sensory neurons")
+    adaptation = c.ankle_adaptation
+    if adaptation is not None:
+        if c.command != "position":
+            out.append(Problem("ankle_adaptation", f"expected none for a {c.command} command (position circuits only)"))
+        need("ankle_adaptation.pitch_input", adaptation.pitch_input, c.inputs, "inputs")
+        for name, foot in adaptation.feet.items():
+            need(f"ankle_adaptation.feet.{name}", name, joints, "joints")
+            need(f"ankle_adaptation.feet.{name}.heel", foot.heel, sensors, "sensory neurons")
+            need(f"ankle_adaptation.feet.{name}.toe", foot.toe, sensors, "sensory neurons")
+            for n, source in enumerate(foot.chain):
+                need(f"ankle_adaptation.feet.{name}.chain.{n}", source, c.inputs, "inputs")
     return out
 
 

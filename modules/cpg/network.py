@@ -72,7 +72,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .adaptation import AnkleCentres
 from .circuit import Circuit
+from .terrain import DETECTORS, TerrainSwitch, TerrainSwitchEvent, TerrainThreshold, Watch, Watcher, make_detector
 
 #: ``np.dot``'s C function without its ``__array_function__`` dispatch (a Python call per use, about 0.3 us: 50 uses per
 #: control tick on the hot path); the same function, so the same numbers, bit for bit (tests/test_humanoid_speed.py)
@@ -182,92 +184,6 @@ class PhaseResetEvent:
     copies: np.ndarray
 
 
-@dataclass(frozen=True)
-class TerrainSwitchEvent:
-    """A terrain switch that happened (§5.8, L1759-1766): at ``time`` (s of CPG time, the start of the tick) the input
-    ``input`` was ``value`` (rad for the torso pitch; per switched copy, an array, when copies differ), ``when``
-    ("above" or "below") ``threshold``, and the parameters started to move from ``old`` to ``new`` (names:
-    ``gain_pitch``, ``gain_roll``: multipliers of the groups' gains; ``sigma_s``), ``mode`` "at_once" (in that tick)
-    or "gradual" (linearly, reaching ``new`` at ``time + seconds``). ``copies``: which batch copies switched."""
-
-    time: float
-    input: str
-    value: float | np.ndarray
-    threshold: float
-    when: str
-    mode: str
-    seconds: float
-    old: dict[str, float | np.ndarray]
-    new: dict[str, float]
-    copies: np.ndarray
-
-    @property
-    def end_time(self) -> float:
-        """s: when the parameters reach their new values (``time`` for "at_once")."""
-        return self.time + self.seconds
-
-
-@dataclass(frozen=True)
-class TerrainThreshold:
-    """What an armed terrain switch watches for (§5.8), once known: from ``since`` s of CPG time on, the input ``input``
-    (rad for the torso pitch) at or below ``low``, at or above ``high``, or either ("outside"), per batch copy (NaN on
-    a side not watched). ``measured``: the window (start, end) in s the band was measured over (digest §7.17), or
-    None for a given threshold."""
-
-    input: str
-    when: str
-    since: float
-    low: np.ndarray
-    high: np.ndarray
-    measured: tuple[float, float] | None
-
-
-class _TerrainSwitch:
-    """An armed terrain switch (``CPGNetwork.arm_terrain_switch``) and its progress per batch copy."""
-
-    def __init__(
-        self,
-        network: CPGNetwork,
-        input: str,
-        threshold,
-        when,
-        after,
-        mode,
-        seconds,
-        gains,
-        sigma_s,
-        joints,
-        band=None,
-        theta_mlr=None,
-    ):
-        b = network.batch
-        self.input_name, self.input = input, network.circuit.inputs.index(input)
-        self.above, self.when = when == "above", when
-        # threshold: given (one number), or measured (band = (k, seconds)): the input's mean +- k x its half range
-        # over ``seconds`` from ``after`` (the gait before the terrain changes, digest §7.17), per copy; then detection
-        self.band = band
-        self.threshold = np.full(b, np.nan if band else float(threshold))
-        if band:
-            self.low, self.high = np.full(b, np.inf), np.full(b, -np.inf)
-            self.total, self.count = np.zeros(b), 0
-            self.measured_from, self.measured_to = float(after), float(after) + float(band[1])
-            after = self.measured_to
-        self.after, self.mode = float(after), mode
-        self.seconds = float(seconds) if mode == "gradual" else 0.0
-        self.gains = dict(gains)  # group -> its new multiplier
-        self.sigma_s = sigma_s  # its new value, or None: unchanged
-        idx = network._joint_indices(joints)
-        self.sigma_columns = np.concatenate([2 * idx + E, 2 * idx + F])
-        self.theta_mlr = theta_mlr  # its new value (4.9, the signs of §7.6), or None: unchanged
-        self.theta_e, self.theta_f = 2 * idx + E, 2 * idx + F
-        self.old_theta = np.zeros((b, len(idx)))
-        self.fired = np.zeros(b, dtype=bool)
-        self.done = np.zeros(b, dtype=bool)
-        self.start = np.zeros(b)  # s: each copy's switch time
-        self.old_gains = {group: np.ones(b) for group in self.gains}  # each copy's values at its switch
-        self.old_sigma = np.zeros((b, len(self.sigma_columns)))
-
-
 class ResetTrigger:
     """When phase resets fire (§7.10), one column per ``phase_resets`` entry: its sensory neuron rising through
     ``threshold`` (below it last tick, at or above it now), once per landing: not within ``refractory`` s of that
@@ -335,6 +251,7 @@ class CPGNetwork:
         self._sensor_input = np.array([circuit.inputs.index(s.input) for s in circuit.sensory_neurons], dtype=int)
         self._sensor_alpha = np.array([s.alpha for s in circuit.sensory_neurons])
         self._sensor_theta = np.array([s.theta for s in circuit.sensory_neurons])
+        self._sensor_theta_file = self._sensor_theta.copy()  # the file's; posture.relative_sensors move some
         ns = len(self.sensor_names)
         weights = {t: np.zeros((n, ns)) for t in TARGETS}  # [neuron, sensory neuron]
         count = {t: np.zeros(n) for t in TARGETS}  # n of (4.10)/(4.12): declared synapses (§7.5)
@@ -365,10 +282,14 @@ class CPGNetwork:
             for group, names in circuit.gain_groups.items()
         }
         posture = circuit.posture  # the torso held near an angle (L1764, §7.18): (input, joints, signs, target, limit)
+        self._relative_sensors = np.zeros(0, dtype=int)
         if posture is not None:
             self._posture_input = circuit.inputs.index(posture.input)
             self._posture_joints = np.array([circuit.joint_index(name) for name in posture.joints], dtype=int)
             self._posture_signs = np.array([float(sign) for sign in posture.joints.values()])
+            self._relative_sensors = np.array([self.sensor_names.index(n) for n in posture.relative_sensors], dtype=int)
+        # each ankle's centre following the slope its foot senses (issue 29; adaptation.py)
+        self._ankles = AnkleCentres(circuit, self.batch) if circuit.ankle_adaptation is not None else None
         self._angle_input = [
             None if j.angle_input is None else circuit.inputs.index(j.angle_input) for j in circuit.joints
         ]
@@ -459,8 +380,12 @@ class CPGNetwork:
         self._split = bool(np.any(self.sigma_in != self.sigma_s) or np.any(self.sigma_out != self.sigma_s))
 
     def _update_pattern_formation(self) -> None:
-        """The PF constants of (4.9) as the step uses them: slope alpha alpha_MLR, centre theta + theta_MLR."""
-        self._pf_half_slope = 0.5 * (self.pf_alpha * self.alpha_mlr)  # halved for _logistic
+        """The PF constants of (4.9) as the step uses them: slope alpha alpha_MLR, centre theta + theta_MLR (during
+        the circuit's ``start_ramp``, alpha_MLR times the ramp's share of the way)."""
+        slope = self.pf_alpha * self.alpha_mlr
+        if self._ramp_share < 1.0:
+            slope = slope * self._ramp_share
+        self._pf_half_slope = 0.5 * slope  # halved for _logistic
         self._pf_centre = self.pf_theta + self.theta_mlr_signed
 
     def _load_parameters(self) -> None:
@@ -486,6 +411,11 @@ class CPGNetwork:
         #: group -> its gain multiplier per batch copy (1 = the circuit's gains)
         self.gain_multipliers = {group: np.ones(b) for group in self.gain_groups}
         self.posture_gain = self.circuit.posture.gain if self.circuit.posture is not None else 0.0  # 1/s
+        self._update_sensor_thresholds()
+        adaptation = self.circuit.ankle_adaptation
+        self.ankle_adaptation = bool(adaptation is not None and adaptation.enabled)  # on this trial (issue 29)
+        self.start_ramp = self.circuit.start_ramp  # s
+        self._ramp_share = 0.0 if self.start_ramp > 0 else 1.0
         self.coupling = self._circuit_coupling.copy()
         self._update_coefficients()
         self._update_pattern_formation()
@@ -543,6 +473,56 @@ class CPGNetwork:
         if not (np.isfinite(gain) and gain >= 0):
             raise ValueError(f"posture_gain: expected a gain in 1/s >= 0; got {gain!r}")
         self.posture_gain = float(gain)
+        self._update_sensor_thresholds()
+
+    def _update_sensor_thresholds(self) -> None:
+        """The sensory neurons' thresholds (4.13): the file's, those of ``posture.relative_sensors`` moved by the
+        posture's target while the posture term is on (a fall from the held lean, issue 29)."""
+        self._sensor_theta = self._sensor_theta_file.copy()
+        if self.posture_gain and len(self._relative_sensors):
+            self._sensor_theta[self._relative_sensors] += self.circuit.posture.target
+
+    def set_ankle_adaptation(self, on: bool) -> None:
+        """The ankles' centres follow the sensed slope this trial (``ankle_adaptation``; ``reset`` restores the
+        circuit's ``enabled``)."""
+        if on and self._ankles is None:
+            raise ValueError(f"ankle_adaptation: circuit {self.circuit.name} has none (circuit key `ankle_adaptation`)")
+        self.ankle_adaptation = bool(on)
+
+    def set_start_ramp(self, seconds: float) -> None:
+        """alpha_MLR grows from 0 over this trial's first ``seconds`` (0: at once); before its first tick."""
+        if not (np.isfinite(seconds) and seconds >= 0):
+            raise ValueError(f"start_ramp: expected a time in s >= 0; got {seconds!r}")
+        if self.tick:
+            raise ValueError("start_ramp: set it before the trial's first tick")
+        self.start_ramp = float(seconds)
+        self._ramp_share = 0.0 if self.start_ramp > 0 else 1.0
+        self._update_pattern_formation()
+
+    @property
+    def slope_estimate(self) -> np.ndarray:
+        """Each adapted foot's slope estimate, rad, + = uphill, (feet,) or (batch, feet); zeros before the first tick
+        or without an adaptation (issue 29)."""
+        out = self.slope_estimate_all()
+        return out if self.batched else out[0]
+
+    def slope_estimate_all(self) -> np.ndarray:
+        """``slope_estimate`` with the batch axis always."""
+        a = self._ankles
+        if a is None:
+            return np.zeros((self.batch, 0))
+        return a.estimate.copy() if a.estimate is not None else np.zeros((self.batch, len(a.joints)))
+
+    @property
+    def ankle_centre(self) -> np.ndarray:
+        """Each adapted ankle's centre shift (added to its theta_0), rad, (feet,) or (batch, feet)."""
+        out = self.ankle_centre_all()
+        return out if self.batched else out[0]
+
+    def ankle_centre_all(self) -> np.ndarray:
+        """``ankle_centre`` with the batch axis always."""
+        a = self._ankles
+        return a.centre.copy() if a is not None else np.zeros((self.batch, 0))
 
     @property
     def posture_shift(self) -> np.ndarray:
@@ -567,6 +547,7 @@ class CPGNetwork:
         sigma_joints: list[str] | None = None,
         band: tuple[float, float] | None = None,
         theta_mlr: float | None = None,
+        detector: str = "torso",
     ) -> None:
         """Switch parameters once this trial when the terrain changes (§5.8, L1759-1766): from ``after`` s on, the first
         tick whose ``input`` (e.g. the torso pitch, rad) is at or ``when`` ("above", "below") ``threshold`` starts
@@ -577,8 +558,9 @@ class CPGNetwork:
         mean +- k x its half range (- below, + above, either for "outside") over ``seconds`` from ``after`` (digest
         §7.17's rule, "defined with taking into account the oscillation range of the torso", L1759), and detection
         starts once it is known.
-        ``theta_mlr`` (None: unchanged) moves the descending theta_MLR (4.9) of ``sigma_joints`` the same way (a
-        condition learnt with another theta_MLR, e.g. chapter 5's uphill with E4.6's climbing setting).
+        ``theta_mlr`` (None: unchanged) moves the descending theta_MLR (4.9) of ``sigma_joints`` the same way.
+        ``detector`` (terrain.py ``DETECTORS``): what is watched, ``input`` itself ("torso", the thesis's) or another
+        sensed signal (issue 29), whose band is measured the same way; "time" fires at ``after``.
         ``reset`` disarms it; the switches are in ``terrain_switch_events``."""
         if input not in self.circuit.inputs:
             raise ValueError(
@@ -599,19 +581,43 @@ class CPGNetwork:
                 )
         if band is not None and not (band[0] >= 0 and band[1] > 0):
             raise ValueError(f"switch_band: expected (k >= 0, seconds > 0); got {band!r}")
-        if band is None and threshold is None:
+        if detector not in DETECTORS:
+            raise ValueError(f"switch_detector: expected one of {list(DETECTORS)}; got {detector!r}")
+        if detector == "time":
+            band, threshold = None, 0.0
+        elif band is None and threshold is None:
             raise ValueError("terrain switch: expected a threshold, or a band to measure it by")
-        if when == "outside" and band is None:
+        if detector not in ("torso", "time") and band is None:
+            raise ValueError(f"switch_detector {detector!r}: expected a band (switch_band) measured on the walk")
+        if when == "outside" and band is None and detector != "time":
             raise ValueError("switch_when 'outside': expected a band (switch_band) to leave; got a threshold")
-        self._terrain = _TerrainSwitch(
-            self, input, threshold, when, after, mode, seconds, gains or {}, sigma_s, sigma_joints, band, theta_mlr
-        )
-        if band is None:  # a given threshold: known from the start
-            given = np.full(self.batch, float(threshold))
-            nan = np.full(self.batch, np.nan)
-            self.terrain_threshold = TerrainThreshold(
-                input, when, float(after), nan if when == "above" else given, given if when == "above" else nan, None
-            )
+        watch = Watch(make_detector(self, detector, input), when, after, band=band, threshold=threshold)
+        self._terrain = TerrainSwitch(self, watch, input, mode, seconds, gains or {}, sigma_s, sigma_joints, theta_mlr)
+        self._terrain_detector = detector
+        self.terrain_threshold = self._terrain.threshold()  # a given threshold: known from the start
+
+    def watch_terrain(self, detectors, band: tuple[float, float], after: float, torso_input: str = "torso_pitch"):
+        """Watch ``detectors`` (terrain.py ``DETECTORS``) this trial without switching: each measures its band (k,
+        seconds) from ``after`` s and records when it first leaves it (``detector_events``), to compare detectors on
+        the same walk (issue 29). ``reset`` stops watching."""
+        watches = [Watch(make_detector(self, name, torso_input), "outside", after, band=band) for name in detectors]
+        self._watcher = Watcher(watches) if watches else None
+
+    @property
+    def terrain_detector(self) -> str | None:
+        """What the armed (or fired) terrain switch watches this trial (terrain.py ``DETECTORS``), or None."""
+        return self._terrain_detector
+
+    @property
+    def detector_events(self) -> list:
+        """The watched detectors' firings this trial (``watch_terrain``), in order."""
+        return self._watcher.events if self._watcher is not None else []
+
+    @property
+    def terrain_switch_jumps(self) -> list[tuple[float, float]]:
+        """(time s, rad) for every tick the terrain switch moved parameters: the largest change of any joint's command
+        the switch itself made in that tick (the state held; continuity of the switch, issue 29)."""
+        return list(self._switch_jumps)
 
     def set_descending(self, alpha_mlr=None, theta_mlr=None, joints: list[str] | None = None) -> None:
         """Descending (MLR) control of the named joints' PF neurons (4.9); theta_MLR with the signs of §7.6."""
@@ -706,7 +712,15 @@ class CPGNetwork:
         self.switch_events: list[SwitchEvent] = []
         posture = self.circuit.posture
         self._posture_shift = np.zeros((b, 0 if posture is None else len(posture.joints)))  # rad, L1764
-        self._terrain: _TerrainSwitch | None = None  # an armed terrain switch (§5.8), until it has done its work
+        self._terrain: TerrainSwitch | None = None  # an armed terrain switch (§5.8), until it has done its work
+        self._watcher: Watcher | None = None  # detectors watched without switching (watch_terrain)
+        self._terrain_detector: str | None = None
+        self._switch_jumps: list[tuple[float, float]] = []
+        if self._ankles is not None:
+            self._ankles.reset()
+        # the posture input's last window of values (posture.window; allocated at its first tick), a running sum
+        self._posture_values: np.ndarray | None = None
+        self._posture_sum, self._posture_count = np.zeros(b), 0
         self._rest_drive: np.ndarray | None = None  # MN_E - MN_F at rest on the first frame (set_gain_multiplier)
         #: the terrain switches so far (§5.8): at most one per copy and trial
         self.terrain_switch_events: list[TerrainSwitchEvent] = []
@@ -817,8 +831,16 @@ class CPGNetwork:
         if self._pending_switches:
             self._switches(phi, control_dt)
         if self._terrain is not None:
-            self._dt_last = control_dt
-            self._terrain_switch(phi)
+            terrain = self._terrain
+            if terrain.tick(phi, self.time, control_dt):
+                self._terrain = None  # every copy has switched and arrived: nothing more per tick
+            if self.terrain_threshold is None:  # measured on the walk: known from the window's last tick on
+                self.terrain_threshold = terrain.threshold()
+            if terrain.jumps:
+                self._switch_jumps.extend(terrain.jumps)
+                terrain.jumps.clear()
+        if self._watcher is not None:
+            self._watcher.tick(phi, self.time, control_dt)
         self._constant = self._per_tick_constant()
         self._integrate(control_dt / substeps, substeps)
         self.tick += 1
@@ -826,9 +848,14 @@ class CPGNetwork:
         if self._pulsing:
             self._pulse_remaining -= control_dt
             self._pulsing = bool(np.any(self._pulse_remaining > 1e-9))
+        if self._ramp_share < 1.0:  # the circuit's start_ramp: alpha_MLR's share of the way at the tick's end
+            self._ramp_share = min(1.0, self.time / self.start_ramp)
+            self._update_pattern_formation()
         self._outputs(rho)
         if self._hold_at_switch:
             self._hold_commands()
+        if self.ankle_adaptation:
+            self.theta0[:, self._ankles.joints] += self._ankles.step(phi, rho, control_dt)
         if self.posture_gain:
             self._posture(phi, control_dt)
         return self._per_joint(self._mn)
@@ -922,111 +949,21 @@ class CPGNetwork:
         """The torso held near its target (L1764, §7.18; circuit ``posture``): each of the posture's joints' theta_0
         moves by gain sign (input - target) dt this tick, its accumulated shift kept within +-limit."""
         posture, old = self.circuit.posture, self._posture_shift
-        lean = phi[:, self._posture_input] - posture.target  # rad, + = past the target in the input's + direction
+        value = phi[:, self._posture_input]
+        if posture.window > 0:  # the input's mean over the last window (one gait cycle: its swing averages out)
+            if self._posture_values is None:
+                self._posture_values = np.zeros((self.batch, max(1, int(round(posture.window / control_dt)))))
+            n = self._posture_values.shape[1]
+            slot = self.tick % n
+            self._posture_sum += value - self._posture_values[:, slot]
+            self._posture_values[:, slot] = value
+            self._posture_count = min(self._posture_count + 1, n)
+            value = self._posture_sum / self._posture_count
+        lean = value - posture.target  # rad, + = past the target in the input's + direction
         shift = old + np.multiply.outer(lean * (self.posture_gain * control_dt), self._posture_signs)
         np.minimum(np.maximum(shift, -posture.limit, out=shift), posture.limit, out=shift)  # np.clip, cheaper
         self.theta0[:, self._posture_joints] += shift - old
         self._posture_shift = shift
-
-    def _terrain_switch(self, phi: np.ndarray) -> None:
-        """The armed terrain switch (§5.8): fire in the copies whose input reached the threshold (from ``after`` on,
-        once), then move their parameters toward the new values (at once, or linearly over ``seconds``)."""
-        ts = self._terrain
-        if ts.band and np.isnan(ts.threshold).any():  # still measuring the gait's band (§7.17)
-            if self.time >= ts.measured_from - 1e-9:
-                value = phi[:, ts.input]
-                np.minimum(ts.low, value, out=ts.low)
-                np.maximum(ts.high, value, out=ts.high)
-                ts.total += value
-                ts.count += 1
-            if self.time + 1e-9 >= ts.measured_to - self._dt_last:  # the window's last tick: the threshold is known
-                mean, half = ts.total / max(ts.count, 1), ts.band[0] * (ts.high - ts.low) / 2
-                ts.threshold = mean + half if ts.above else mean - half  # "outside": the lower edge here ...
-                ts.upper = mean + half  # ... and the upper one
-                nan = np.full(len(mean), np.nan)
-                self.terrain_threshold = TerrainThreshold(
-                    ts.input_name,
-                    ts.when,
-                    ts.measured_to,
-                    nan if ts.when == "above" else mean - half,
-                    nan if ts.when == "below" else mean + half,
-                    (ts.measured_from, ts.measured_to),
-                )
-            return
-        if self.time >= ts.after - 1e-9:
-            value = phi[:, ts.input]
-            if ts.when == "outside":  # leaving the gait's band either way
-                due = ((value <= ts.threshold) | (value >= ts.upper)) & ~ts.fired
-            else:
-                due = (value >= ts.threshold if ts.above else value <= ts.threshold) & ~ts.fired
-            if due.any():
-                self._start_terrain_switch(ts, due, value)
-        moving = ts.fired & ~ts.done
-        if not moving.any():
-            return
-        rows = np.flatnonzero(moving)
-        if ts.mode == "gradual":
-            fraction = np.clip((self.time - ts.start[rows]) / ts.seconds + 1e-9, 0.0, 1.0)
-        else:
-            fraction = np.ones(len(rows))
-        for group, new in ts.gains.items():
-            old = ts.old_gains[group][rows]
-            self._set_gains(group, old + fraction * (new - old), rows)
-        if ts.sigma_s is not None:
-            old = ts.old_sigma[rows]
-            value = old + fraction[:, None] * (ts.sigma_s - old)
-            cells = np.ix_(rows, ts.sigma_columns)
-            self.sigma_s[cells] = value
-            self.sigma_in[cells] = value
-            self.sigma_out[cells] = value
-            self._update_coefficients()
-        if ts.theta_mlr is not None:
-            old = ts.old_theta[rows]
-            value = old + fraction[:, None] * (ts.theta_mlr - old)
-            self.theta_mlr_signed[np.ix_(rows, ts.theta_e)] = -value
-            self.theta_mlr_signed[np.ix_(rows, ts.theta_f)] = value
-            self._update_pattern_formation()
-        ts.done[rows] = fraction >= 1.0
-        if ts.done.all():
-            self._terrain = None  # every copy has switched and arrived: nothing more per tick
-
-    def _start_terrain_switch(self, ts: _TerrainSwitch, due: np.ndarray, value: np.ndarray) -> None:
-        """The copies ``due`` switch now: keep their current values (the old ones) and record the event."""
-        ts.fired |= due
-        ts.start[due] = self.time
-        for group in ts.gains:
-            ts.old_gains[group][due] = self.gain_multipliers[group][due]
-        ts.old_sigma[due] = self.sigma_s[np.ix_(np.flatnonzero(due), ts.sigma_columns)]
-        ts.old_theta[due] = self.theta_mlr_signed[np.ix_(np.flatnonzero(due), ts.theta_f)]
-
-        def per_copy(values: np.ndarray) -> float | np.ndarray:  # one number, or one per switched copy
-            values = np.asarray(values, dtype=float)
-            return float(values.flat[0]) if np.all(values == values.flat[0]) else values.copy()
-
-        old = {f"gain_{group}": per_copy(ts.old_gains[group][due]) for group in ts.gains}
-        new = {f"gain_{group}": float(v) for group, v in ts.gains.items()}
-        if ts.sigma_s is not None:
-            old["sigma_s"] = per_copy(ts.old_sigma[due])
-            new["sigma_s"] = float(ts.sigma_s)
-        if ts.theta_mlr is not None:
-            old["theta_mlr"] = per_copy(ts.old_theta[due])
-            new["theta_mlr"] = float(ts.theta_mlr)
-        self.terrain_switch_events.append(
-            TerrainSwitchEvent(
-                time=self.time,
-                input=ts.input_name,
-                value=per_copy(value[due]),
-                threshold=per_copy(ts.threshold[due])
-                if ts.when != "outside"
-                else (per_copy(ts.threshold[due]), per_copy(ts.upper[due])),
-                when=ts.when,
-                mode=ts.mode,
-                seconds=ts.seconds,
-                old=old,
-                new=new,
-                copies=due.copy(),
-            )
-        )
 
     def _hold_commands(self) -> None:
         """A continuous switch's last part: theta_0 := angle - G (MN_E - MN_F) with this tick's MN, so that the command
@@ -1163,6 +1100,12 @@ class CPGNetwork:
         )
 
     # ---------------------------------------------------------------- outputs
+
+    def command_all(self) -> np.ndarray:
+        """``command`` with the batch axis always, (batch, joints)."""
+        mn = self._mn
+        drive = self._gain * (mn[:, E::2] - mn[:, F::2])
+        return drive if self.circuit.command == "voltage" else self.theta0 + drive
 
     def command(self) -> np.ndarray:
         """The joint commands, (joints,) or (batch, joints).

@@ -111,6 +111,8 @@ files["high_nan.yaml"] = sub(BASE, "low: 0, high: 1}\n  - {name: y", "low: 0, hi
 files["condition_inf.yaml"] = sub(BASE, "modules:", "conditions:\n  body.z: .inf\nmodules:")
 files["param_nan.yaml"] = sub(BASE, "value: -0.1", "value: .NaN")
 files["timeout_inf.yaml"] = BASE + "timeouts: {ready: .inf}\n"
+files["lease_too_short.yaml"] = BASE + "timeouts: {lease: 0.1}\n"
+files["timeout_misspelt.yaml"] = BASE + "timeouts: {hang: 60}\n"
 
 # --- what would fail at start --------------------------------------------------------------------
 files["map_shape_huge.yaml"] = sub(BASE, "acc: {impl: acc}", "acc: {impl: acc, params: {shape: [1000, 1000, 1000]}}")

@@ -82,6 +82,10 @@ CASES: dict[str, list[str]] = {
     "condition_inf.yaml": ["conditions.body.z: expected a finite number; got .inf"],
     "param_nan.yaml": ["modules.vigilance.params.value: expected a finite number; got .nan"],
     "timeout_inf.yaml": ["timeouts.ready: expected a finite number; got .inf"],
+    "lease_too_short.yaml": ["timeouts.lease: input should be greater than or equal to 0.5; got 0.1"],
+    "timeout_misspelt.yaml": [
+        "timeouts.hang: unknown key; expected one of ['lease', 'ready', 'request', 'tick', 'trial']"
+    ],
     # --- what would fail at start
     "map_shape_huge.yaml": [
         "modules.acc.params: expected at most 4096 neurons (e.g. 64 x 64 or 16 x 16 x 16); shape "
