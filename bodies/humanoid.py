@@ -57,10 +57,10 @@ import hashlib
 import math
 import os
 import tempfile
-from typing import ClassVar
+from typing import ClassVar, Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, field_validator, model_validator
 
 from sfl_brain.bodies.humanoid_table import (
     FSR_X,
@@ -276,6 +276,25 @@ class HumanoidParams(BodyParams):
         description="kg: every link's mass (and inertia) scaled so that the robot weighs this; none: the table's "
         f"{TOTAL_MASS:.3f} kg (NAO V4.0). The thesis's robot weighs 4.3 kg (L1430; issue 29's E4.7 at 4.3 kg)",
     )
+    physics: Literal["pybullet", "mujoco"] = Field("pybullet", description="physics engine (mujoco: an extra, 31)")
+
+    @field_validator("physics")
+    @classmethod
+    def _engine_installed(cls, physics: str) -> str:  # MuJoCo is optional: refused at `sfl check` without it
+        if physics == "mujoco":
+            from sfl_brain.bodies.humanoid_mujoco import import_mujoco
+
+            try:
+                import_mujoco()
+            except ImportError as exc:
+                raise ValueError(str(exc)) from None
+        return physics
+
+    @model_validator(mode="after")
+    def _mass_on_pybullet(self) -> "HumanoidParams":  # the MJCF has the table's masses only (issue 31)
+        if self.physics == "mujoco" and self.total_mass is not None:
+            raise ValueError("total_mass is PyBullet's only for now: with physics: mujoco leave it out (none)")
+        return self
 
 
 class Humanoid(Body):
@@ -286,6 +305,13 @@ class Humanoid(Body):
     COMMANDS = COMMANDS
     TRIAL_PARAMS = ("slope_deg", "terrain", *PUSH_RANGES, *START_RANGES)
     LAYOUT = "humanoid"  # the recording's default layout: the walk in 3-D, the torso pitch with the terrain switch
+
+    def __new__(cls, params: HumanoidParams | None = None, *, seed: int = 0):
+        if params is not None and params.physics == "mujoco":  # the same body on MuJoCo (humanoid_mujoco.py)
+            from sfl_brain.bodies.humanoid_mujoco import HumanoidMujoco
+
+            return HumanoidMujoco.__new__(HumanoidMujoco, params, seed=seed)
+        return super().__new__(cls)
 
     def __init__(self, params: HumanoidParams | None = None, *, seed: int = 0) -> None:
         super().__init__(params, seed=seed)

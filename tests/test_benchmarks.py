@@ -71,6 +71,13 @@ def test_humanoid_benchmark_prints_the_trial_over_processes_against_one_process(
     figures(out, r"\(c\)  CPG \+ body over processes +[\d.]+ ms  \( *([\d.]+)x real time")
 
 
+def test_engines_benchmark_prints_pybullet_against_mujoco():
+    out = bench("engines.py", "--quick")
+    figures(out, r"PyBullet +[\d.]+ ms \( *([\d.]+)x real time\)", 3)
+    figures(out, r"wall ([\d.]+)x, CPU", 3)
+    figures(out, r"CPU ([\d.]+)x \(", 3)
+
+
 def test_brain_benchmark_prints_the_cycle_per_trial():
     out = bench("brain.py", "--trials", "100", "--repeats", "1", "--batches", "100")
     figures(out, r"([\d.]+) ms/trial", count=2)
