@@ -226,7 +226,23 @@ class CPGNetwork:
     ``batch=None`` (the default) is one network whose accessors return arrays without the batch axis.
     Per-copy parameters (``set_pattern``, ``set_descending``) may differ between copies."""
 
-    def __init__(self, circuit: Circuit, batch: int | None = None) -> None:
+    #: how ``advance`` integrates: "numpy" (``_integrate``, the default) or "numba" (``compiled.py``, the same RK4
+    #: compiled, the ``fast`` extra; within 1e-9 of numpy's commands, issue 31)
+    KERNELS = ("numpy", "numba")
+
+    def __init__(self, circuit: Circuit, batch: int | None = None, kernel: str = "numpy") -> None:
+        if kernel not in self.KERNELS:
+            raise ValueError(f"kernel: expected one of {list(self.KERNELS)}; got {kernel!r}")
+        self._rk4_compiled = None
+        if kernel == "numba":
+            try:
+                from .compiled import rk4_steps
+            except ImportError as exc:
+                raise ValueError(
+                    f"kernel 'numba': numba is not installed ({exc}); pip install -e '.[fast]', or kernel 'numpy'"
+                ) from None
+            self._rk4_compiled = rk4_steps
+        self.kernel = kernel
         self.circuit = circuit
         self.batched = batch is not None
         self.batch = batch or 1
@@ -345,6 +361,7 @@ class CPGNetwork:
         self._combined = np.zeros(b * 2 * n)
         # y(t + h) = y + h/6 (k1 + 2 k2 + 2 k3 + k4) = y + (h/2 k1)/3 + 2 (h/2 k2)/3 + (h k3)/3 + (h k4)/6
         self._rk4_weights = np.array([1.0 / 3.0, 2.0 / 3.0, 1.0 / 3.0, 1.0 / 6.0])
+        self._no_constant = np.zeros((b, 2 * n))  # the compiled kernel's constants on a tick without any
         self.reset(0)
 
     # ---------------------------------------------------------------- parameters
@@ -378,6 +395,11 @@ class CPGNetwork:
         self._slow_constant = -self.sigma_s * self.E_s / self.tau_s  # -sigma_s E_s / tau_s (4.6)
         self._has_slow_constant = bool(np.any(self._slow_constant))
         self._split = bool(np.any(self.sigma_in != self.sigma_s) or np.any(self.sigma_out != self.sigma_s))
+        # the couplings by target cell for the compiled kernel: cell i's sources and weights at [rows[i], rows[i + 1])
+        targets, sources = np.nonzero(self.coupling)
+        self._coupling_rows = np.searchsorted(targets, np.arange(n + 1)).astype(np.int64)
+        self._coupling_sources = sources.astype(np.int64)
+        self._coupling_weights = self.coupling[targets, sources]
 
     def _update_pattern_formation(self) -> None:
         """The PF constants of (4.9) as the step uses them: slope alpha alpha_MLR, centre theta + theta_MLR (during
@@ -812,6 +834,30 @@ class CPGNetwork:
             dot(weights, all_increments, combined)
             add(y, y_combined, y)
 
+    def _integrate_compiled(self, h: float, substeps: int) -> None:
+        """``_integrate`` in one call of the compiled kernel (``kernel="numba"``, compiled.py)."""
+        constant = self._constant
+        if constant is None:
+            constant = self._no_constant
+        self._rk4_compiled(
+            self.y,
+            h,
+            substeps,
+            float(self.tau_m),
+            float(self.tau_s),
+            float(self.A_f),
+            float(self.E_s),
+            self.sigma_s,
+            self.sigma_f,
+            self.sigma_in,
+            self.sigma_out,
+            self._split,
+            self._coupling_rows,
+            self._coupling_sources,
+            self._coupling_weights,
+            constant,
+        )
+
     def advance(self, sensors=None, control_dt: float = 0.01, substeps: int = 10) -> np.ndarray:
         """One control tick: sample the sensors, apply triggers and pulses, integrate ``control_dt`` s in
         ``substeps`` RK4 steps (h = 1 ms by default), then compute PF and MN.
@@ -842,7 +888,10 @@ class CPGNetwork:
         if self._watcher is not None:
             self._watcher.tick(phi, self.time, control_dt)
         self._constant = self._per_tick_constant()
-        self._integrate(control_dt / substeps, substeps)
+        if self._rk4_compiled is not None:
+            self._integrate_compiled(control_dt / substeps, substeps)
+        else:
+            self._integrate(control_dt / substeps, substeps)
         self.tick += 1
         self.time = self.tick * control_dt
         if self._pulsing:
