@@ -51,7 +51,11 @@ def rk4_steps(
     k = np.empty((4, 2, n))
     Y = np.empty((2, n))
     out = np.empty(n)
+    slope = np.empty(n)
+    over_tau_m, over_tau_s, over_A_f = 1.0 / tau_m, 1.0 / tau_s, 1.0 / A_f  # multiplications in the loop, not divisions
     for c in range(b):
+        for i in range(n):
+            slope[i] = sigma_f[c, i] / A_f  # tanh((sigma_f / A_f) V) of (4.4)
         for _ in range(substeps):
             for s in range(4):
                 step = 0.0 if s == 0 else (0.5 * h if s < 3 else h)  # Y_s = y + c_s k_{s-1}
@@ -62,19 +66,57 @@ def rk4_steps(
                     else:
                         Y[0, i] = y[c, 0, i] + step * k[s - 1, 0, i]
                         Y[1, i] = y[c, 1, i] + step * k[s - 1, 1, i]
-                    out[i] = math.tanh(Y[0, i] / A_f)  # the presynaptic output (§7.3)
+                    out[i] = math.tanh(Y[0, i] * over_A_f)  # the presynaptic output (§7.3)
                 for i in range(n):
                     V, q = Y[0, i], Y[1, i]
                     i_syn = 0.0
                     for p in range(rows[i], rows[i + 1]):
                         i_syn += weights[p] * out[sources[p]]
-                    fast = V - A_f * math.tanh((sigma_f[c, i] / A_f) * V)  # (4.4)
-                    k[s, 0, i] = -(fast + q - i_syn) / tau_m + constant[c, i]  # (4.1)
-                    dq = (sigma_s[c, i] * V - q) / tau_s + constant[c, n + i]  # (4.2), (4.6)
+                    fast = V - A_f * math.tanh(slope[i] * V)  # (4.4)
+                    k[s, 0, i] = -(fast + q - i_syn) * over_tau_m + constant[c, i]  # (4.1)
+                    dq = (sigma_s[c, i] * V - q) * over_tau_s + constant[c, n + i]  # (4.2), (4.6)
                     if split:  # (4.8): sigma_in below E_s, sigma_out above, instead of sigma_s
                         sigma = sigma_in[c, i] if V < E_s else sigma_out[c, i]
-                        dq += (sigma - sigma_s[c, i]) * (V - E_s) / tau_s
+                        dq += (sigma - sigma_s[c, i]) * (V - E_s) * over_tau_s
                     k[s, 1, i] = dq
             for i in range(n):
                 for side in range(2):
                     y[c, side, i] += h / 6.0 * ((k[0, side, i] + 2.0 * (k[1, side, i] + k[2, side, i])) + k[3, side, i])
+
+
+@njit(cache=True)
+def layers(
+    rho,
+    V,
+    w_sensory,
+    w_rg2pf,
+    bounded,
+    A_f,
+    pf_divisor,
+    pf_half_slope,
+    pf_centre,
+    w_pf2mn,
+    mn_divisor,
+    mn_half_slope,
+    mn_theta,
+):
+    """PF (4.9)-(4.10) and MN (4.11)-(4.12) of every cell from V at the end of the tick and the sensory neurons ``rho``
+    (batch, sensory), as ``CPGNetwork._outputs`` computes them; returns (PF, MN), each (batch, n).
+
+    I_PF = (w_rg2pf RG + sum_j w_j S_j) / (n_PF + 1), PF = sigmoid(alpha alpha_MLR (I_PF - (theta + theta_MLR)))
+    I_MN = (w_pf2mn PF + sum_j w_j S_j) / (n_MN + 1), MN = sigmoid(alpha (I_MN - theta))
+    with sigmoid(2 a x) = (1 + tanh(a x)) / 2 (``_logistic``); RG = V, or tanh(V / A_f) when ``bounded``."""
+    b, n = V.shape
+    pf, mn = np.empty((b, n)), np.empty((b, n))
+    for c in range(b):
+        for i in range(n):
+            drive_pf, drive_mn = 0.0, 0.0
+            for j in range(rho.shape[1]):
+                drive_pf += rho[c, j] * w_sensory[j, i]
+                drive_mn += rho[c, j] * w_sensory[j, n + i]
+            rg = math.tanh(V[c, i] / A_f) if bounded else V[c, i]
+            I_pf = (w_rg2pf[i] * rg + drive_pf) / pf_divisor[i]  # (4.10) L1110
+            pf[c, i] = 0.5 * (1.0 + math.tanh(pf_half_slope[c, i] * (I_pf - pf_centre[c, i])))  # (4.9) L1108
+            I_mn = (w_pf2mn[i] * pf[c, i] + drive_mn) / mn_divisor[i]  # (4.12) L1125
+            mn[c, i] = 0.5 * (1.0 + math.tanh(mn_half_slope * (I_mn - mn_theta)))  # (4.11) L1123
+    return pf, mn

@@ -241,7 +241,9 @@ class CPGNetwork:
                 raise ValueError(
                     f"kernel 'numba': numba is not installed ({exc}); pip install -e '.[fast]', or kernel 'numpy'"
                 ) from None
-            self._rk4_compiled = rk4_steps
+            from .compiled import layers
+
+            self._rk4_compiled, self._layers_compiled = rk4_steps, layers
         self.kernel = kernel
         self.circuit = circuit
         self.batched = batch is not None
@@ -913,6 +915,23 @@ class CPGNetwork:
         """PF (4.9)-(4.10) and MN (4.11)-(4.12) from V at the end of the tick and the sampled sensory neurons: the same
         as ``averaged_input``, ``pattern_formation`` and ``motor_neuron``, with the constants prepared once."""
         self._sensory = rho
+        if self._rk4_compiled is not None:  # kernel numba: the same layers compiled (compiled.py ``layers``)
+            self._pf, self._mn = self._layers_compiled(
+                rho,
+                self.y[:, 0],
+                self._w_sensory,
+                self._w_rg2pf,
+                self._pf_bounded,
+                float(self.A_f),
+                self._pf_divisor,
+                self._pf_half_slope,
+                self._pf_centre,
+                self._w_pf2mn,
+                self._mn_divisor,
+                float(self._mn_half_slope),
+                float(self.mn_theta),
+            )
+            return
         n = self.n_neurons
         drive = rho @ self._w_sensory  # sum_j w_j S_j of (4.10) in [:, :n], of (4.12) in [:, n:]
         rg = self.y[:, 0]
