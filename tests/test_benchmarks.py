@@ -3,6 +3,7 @@
 Nothing here asserts a time (machines are noisy); only that each figure is printed and is a
 finite positive number."""
 
+import importlib.util
 import math
 import re
 import subprocess
@@ -85,8 +86,12 @@ def test_brain_benchmark_prints_the_cycle_per_trial():
 
 def test_cpg_benchmark_prints_the_cost_per_tick_beside_the_physics():
     out = bench("cpg.py", "--ticks", "200")
-    # planar and humanoid circuits (network and controller tick each), the stand-in and the 8-link walker physics
-    figures(out, r"median +([\d.]+) us", count=6)
+    # planar and humanoid circuits (network and controller tick each, on each kernel: numpy, and numba when installed),
+    # the stand-in and the 8-link walker physics
+    compiled = importlib.util.find_spec("numba") is not None
+    figures(out, r"median +([\d.]+) us", count=10 if compiled else 6)
+    if compiled:  # numba / numpy per tick, each circuit's network and controller tick
+        figures(out, r"  (?:planar_8link|humanoid_nao) (?:advance|controller) +([\d.]+)\n", count=4)
 
 
 def test_proposers_benchmark_prints_each_proposers_cost_beside_the_trial():
