@@ -10,16 +10,19 @@ import subprocess
 import sys
 from pathlib import Path
 
+from .conftest import on_all_cores
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def bench(script: str, *args: str) -> str:
+def bench(script: str, *args: str, **kw) -> str:
     done = subprocess.run(
         [sys.executable, str(ROOT / "benchmarks" / script), *args],
         capture_output=True,
         text=True,
         timeout=600,
         cwd=ROOT,
+        **kw,
     )
     assert done.returncode == 0, done.stderr[-3000:]
     return done.stdout
@@ -101,7 +104,8 @@ def test_proposers_benchmark_prints_each_proposers_cost_beside_the_trial():
 
 
 def test_placement_benchmark_prints_both_placements_and_their_ratio():
-    out = bench("placement.py", "--rounds", "1", "--trials", "2", "--conditions", "pinned")
+    # it compares placements on two cores: on the session's cores, not on this xdist worker's share (tests/conftest.py)
+    out = bench("placement.py", "--rounds", "1", "--trials", "2", "--conditions", "pinned", preexec_fn=on_all_cores)
     assert out.count("load average") == 2  # before and after the runs
     figures(out, r"  pinned   before +([\d.]+)")
     figures(out, r"   yields +([\d.]+)   yields/before")
