@@ -9,7 +9,8 @@ humanoid circuit (12 joints, 24 cells):
 - the controller's tick as the framework runs it in the body's process: ``InProcessLink.step(frame)`` ->
   ``CPGController.on_sensor_frame`` (dispatch, wiring by name, the network, the ``MotorCommand``);
 
-and one physics tick of
+each on both kernels of the network when numba is installed (``CPGParams.kernel``: "numpy", the default, and "numba",
+the same RK4 and layers compiled, issue 31; goal: numba <= 0.4x numpy per tick), and one physics tick of
 
 - the chapter-3 planar biped (``bodies/planar_biped.py``, 5 bodies, 4 driven joints), stepped with a fixed
   open-loop command as ``benchmarks/planar.py`` (a) steps it: the stand-in the CPG was first compared with;
@@ -55,9 +56,17 @@ def frame_for(circuit) -> np.ndarray:
     return sensors
 
 
-def controller_link(name: str) -> tuple[InProcessLink, np.ndarray]:
+try:  # the compiled kernel, if numba is installed (the fast extra)
+    import numba  # noqa: F401
+
+    KERNELS = ("numpy", "numba")
+except ImportError:
+    KERNELS = ("numpy",)
+
+
+def controller_link(name: str, kernel: str = "numpy") -> tuple[InProcessLink, np.ndarray]:
     """The CPG controller behind an in-process link, reset for a body laid out as the circuit's inputs and commands."""
-    params = CPGParams(circuit=name)
+    params = CPGParams(circuit=name, kernel=kernel)
     reads, writes = CPGController.signals(params)
     link = InProcessLink(CPGController(params))
     link.reset(ControllerReset(trial_id=0, seed=0, params={}, sensors=list(reads), commands=list(writes)))
@@ -104,11 +113,13 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--ticks", type=int, default=3000, help="control ticks timed per item (10 ms of sim each)")
     args = parser.parse_args()
-    networks = {}
+    networks, links = {}, {}
     for name, _ in CIRCUITS:
         circuit = load_circuit(name)
-        networks[name] = (CPGNetwork(circuit), frame_for(circuit))
-    links = {name: controller_link(name) for name, _ in CIRCUITS}
+        for kernel in KERNELS:
+            networks[name, kernel] = (CPGNetwork(circuit, kernel=kernel), frame_for(circuit))
+            links[name, kernel] = controller_link(name, kernel)
+            networks[name, kernel][0].advance(networks[name, kernel][1])  # numba compiles (or loads) on the first call
     command = np.array([1.0, -1.0, 0.5, 0.5])
     biped = stand_in()
     walker = Walker() if PlanarWalker8 is not None else None
@@ -117,19 +128,19 @@ def main() -> None:
     for tick in range(args.ticks):
         if tick % 1000 == 999:  # a 10-s trial of the stand-in ends; start another (not timed)
             biped = stand_in()
-        for name, _ in CIRCUITS:
-            network, sensors = networks[name]
+        for (name, kernel), (network, sensors) in networks.items():
             t0 = clock()
             network.advance(sensors)
             network.command()
             t1 = clock()
-            link, sensors = links[name]
+            link, sensors = links[name, kernel]
             frame = SensorFrame(trial_id=0, tick=tick, values=sensors)
             t2 = clock()
             link.step(frame)
             t3 = clock()
-            samples.setdefault(f"{name} advance", []).append(t1 - t0)
-            samples.setdefault(f"{name} controller", []).append(t3 - t2)
+            tag = "" if kernel == "numpy" else f" {kernel}"
+            samples.setdefault(f"{name} advance{tag}", []).append(t1 - t0)
+            samples.setdefault(f"{name} controller{tag}", []).append(t3 - t2)
         t0 = clock()
         biped.actuate(command)
         samples["biped"].append(clock() - t0)
@@ -140,8 +151,12 @@ def main() -> None:
     physics = [("biped", "ch.3 biped (stand-in)")] + ([("walker", "8-link walker")] if walker else [])
     rows = []
     for name, size in CIRCUITS:
-        rows.append((f"CPG {name} ({size}): CPGNetwork.advance + command", f"{name} advance"))
-        rows.append((f"CPG {name} ({size}): controller tick (on_sensor_frame)", f"{name} controller"))
+        for kernel in KERNELS:
+            tag = "" if kernel == "numpy" else f" {kernel}"
+            rows.append((f"CPG {name} ({size}), {kernel}: CPGNetwork.advance + command", f"{name} advance{tag}"))
+            rows.append(
+                (f"CPG {name} ({size}), {kernel}: controller tick (on_sensor_frame)", f"{name} controller{tag}")
+            )
     rows.append(("physics, ch.3 planar biped (the stand-in, 4 joints)", "biped"))
     if walker is not None:
         rows.append((f"physics, 8-link planar walker (7 joints, CPG-driven, {walker.trial + 1} trials)", "walker"))
@@ -154,8 +169,18 @@ def main() -> None:
     print(f"CPG / physics, medians (goal < 1):{''.join(f'{label:>24}' for _, label in physics)}")
     for name, _ in CIRCUITS:
         for kind in ("advance", "controller"):
-            ratios = "".join(f"{medians[f'{name} {kind}'] / medians[key]:>24.2f}" for key, _ in physics)
-            print(f"  {f'{name} {kind}':<32}{ratios}")
+            for kernel in KERNELS:
+                tag = "" if kernel == "numpy" else f" {kernel}"
+                ratios = "".join(f"{medians[f'{name} {kind}{tag}'] / medians[key]:>24.2f}" for key, _ in physics)
+                print(f"  {f'{name} {kind}{tag}':<32}{ratios}")
+    if "numba" in KERNELS:  # medians of the per-tick ratios: each pair timed in the same tick
+        print("numba / numpy per tick, median of the ratios (goal <= 0.4):")
+        for name, _ in CIRCUITS:
+            for kind in ("advance", "controller"):
+                ratio = np.median(np.array(samples[f"{name} {kind} numba"]) / np.array(samples[f"{name} {kind}"]))
+                print(f"  {f'{name} {kind}':<32}{ratio:>8.2f}")
+    else:
+        print("(numba is not installed: the numpy kernel only; pip install -e '.[fast]' adds the compiled one)")
 
 
 if __name__ == "__main__":

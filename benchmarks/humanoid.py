@@ -13,6 +13,8 @@ the rounds, ratios medians of the ratios within each round; the load average is 
 (b) the default gait: ``CPGController`` with the ``humanoid_nao`` circuit in the body's process (``InProcessLink``),
     the trial as ``sfl run`` runs it with ``colocate: true``; (a), (a') and (b) run on the core (c) places its pair on,
     so that all meet the same neighbours on a busy machine;
+(b-numba) (b) with the network's RK4 and layers compiled (``CPGParams.kernel: numba``, the ``fast`` extra; issue 31),
+    when numba is installed; its commands are within 1e-9 of numpy's per tick, so its walk is not bit for bit (b)'s;
 (c) the same trial with controller and body each hosted in its own process by ``sfl_brain.host``, as ``sfl run`` hosts
     them: placed as ``lockstep.pin_cpus`` ``--pin`` says (default ``auto``: both on one core, blocking), their frames
     and commands on their socket link (``lockstep.link: socket``); the trial is a request from this process,
@@ -33,6 +35,7 @@ benchmark. ``--quick``: 2 repeats, (c) only, for a smoke test.
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import shutil
 import sys
 import tempfile
@@ -147,6 +150,10 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     standing_body.link = InProcessLink(Standing())
     cpg_body = new_body()
     cpg_body.link = InProcessLink(CPGController(CPGParams(**CONTROLLER_PARAMS)))
+    numba_body = None
+    if importlib.util.find_spec("numba") is not None:
+        numba_body = new_body()
+        numba_body.link = InProcessLink(CPGController(CPGParams(**CONTROLLER_PARAMS, kernel="numba")))
     times: dict[str, list[float]] = {}
     pairs: dict[str, Processes] = {}
     variants = {
@@ -166,8 +173,12 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
             over_bus = pair.trial()[1]
             assert over_bus == in_process, (over_bus, in_process)  # the same trial over processes, bit for bit
         whole_trial(standing_body)
+        if numba_body is not None:
+            whole_trial(numba_body)  # numba compiles or loads its cache
         core = pairs["c"].placement.of("body")  # the one-process trials run on the pair's core
         order, shuffle = ["a", "a1", "b", *pairs], np.random.default_rng(0).shuffle
+        if numba_body is not None:
+            order.append("b-numba")
         for _ in range(repeats):  # interleaved in a shuffled order, so that all see the same machine load
             shuffle(order)
             for name in order:
@@ -178,7 +189,8 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
                         if name == "a":
                             t = physics_only(physics_body)
                         else:
-                            t = whole_trial(standing_body if name == "a1" else cpg_body)[0]
+                            body = {"a1": standing_body, "b": cpg_body, "b-numba": numba_body}[name]
+                            t = whole_trial(body)[0]
                 times.setdefault(name, []).append(t)
         during = machine_load()
     finally:
@@ -186,8 +198,9 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
             pair.close()
         session.close()
         shutil.rmtree(folder, ignore_errors=True)
-        for body in (physics_body, standing_body, cpg_body):
-            body.close()
+        for body in (physics_body, standing_body, cpg_body, numba_body):
+            if body is not None:
+                body.close()
     m = {name: float(np.median(v)) for name, v in times.items()}
     a, a1, b, c = m["a"], m["a1"], m["b"], m["c"]
 
@@ -203,6 +216,11 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     print(f"  (a)  physics only, standing command      {a * 1e3:7.1f} ms  ({SECONDS / a:5.1f}x real time)")
     print(f"  (a') body trial, constant controller     {a1 * 1e3:7.1f} ms  ({SECONDS / a1:5.1f}x real time)")
     print(f"  (b)  CPG + body, one process             {b * 1e3:7.1f} ms  ({SECONDS / b:5.1f}x real time; goal >= 20x)")
+    if "b-numba" in m:
+        print(
+            f"  (b-numba) (b), compiled CPG kernel      {m['b-numba'] * 1e3:7.1f} ms  ({SECONDS / m['b-numba']:5.1f}x "
+            f"real time); (b)/(b-numba) = {ratio('b', 'b-numba'):.2f}x the one-process speed (issue 31's goal >= 1.4)"
+        )
     print(f"  (c)  CPG + body over processes           {c * 1e3:7.1f} ms  ({SECONDS / c:5.1f}x real time; goal >= 20x)")
     print(f"  (b)/(c) = {ratio('b', 'c'):.2f} of the one-process speed over processes (goal >= 0.8)")
     print(f"  (b)/(a) = {ratio('b', 'a'):.2f}   (c)/(b) = {ratio('c', 'b'):.2f}   (c)/(a) = {ratio('c', 'a'):.2f}")

@@ -3,6 +3,7 @@
 Nothing here asserts a time (machines are noisy); only that each figure is printed and is a
 finite positive number."""
 
+import importlib.util
 import math
 import re
 import subprocess
@@ -14,14 +15,14 @@ from .conftest import on_all_cores
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def bench(script: str, *args: str, **popen) -> str:
+def bench(script: str, *args: str, **kw) -> str:
     done = subprocess.run(
         [sys.executable, str(ROOT / "benchmarks" / script), *args],
         capture_output=True,
         text=True,
         timeout=600,
         cwd=ROOT,
-        **popen,
+        **kw,
     )
     assert done.returncode == 0, done.stderr[-3000:]
     return done.stdout
@@ -88,8 +89,12 @@ def test_brain_benchmark_prints_the_cycle_per_trial():
 
 def test_cpg_benchmark_prints_the_cost_per_tick_beside_the_physics():
     out = bench("cpg.py", "--ticks", "200")
-    # planar and humanoid circuits (network and controller tick each), the stand-in and the 8-link walker physics
-    figures(out, r"median +([\d.]+) us", count=6)
+    # planar and humanoid circuits (network and controller tick each, on each kernel: numpy, and numba when installed),
+    # the stand-in and the 8-link walker physics
+    compiled = importlib.util.find_spec("numba") is not None
+    figures(out, r"median +([\d.]+) us", count=10 if compiled else 6)
+    if compiled:  # numba / numpy per tick, each circuit's network and controller tick
+        figures(out, r"  (?:planar_8link|humanoid_nao) (?:advance|controller) +([\d.]+)\n", count=4)
 
 
 def test_proposers_benchmark_prints_each_proposers_cost_beside_the_trial():
@@ -99,7 +104,7 @@ def test_proposers_benchmark_prints_each_proposers_cost_beside_the_trial():
 
 
 def test_placement_benchmark_prints_both_placements_and_their_ratio():
-    # on every core of the session, not on this xdist worker's share (conftest): it compares placements over cores
+    # it compares placements on two cores: on the session's cores, not on this xdist worker's share (tests/conftest.py)
     out = bench("placement.py", "--rounds", "1", "--trials", "2", "--conditions", "pinned", preexec_fn=on_all_cores)
     assert out.count("load average") == 2  # before and after the runs
     figures(out, r"  pinned   before +([\d.]+)")

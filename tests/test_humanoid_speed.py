@@ -30,6 +30,7 @@ from sfl_brain.bodies.humanoid import (
     SPEED,
     UPPER,
     Humanoid,
+    _motor_powers,
     pb,
 )
 from sfl_brain.body import InProcessLink
@@ -172,3 +173,14 @@ def test_a_trial_is_the_same_bit_for_bit_as_the_plain_code_gives(monkeypatch, bo
     assert np.array_equal(fast[2], plain[2])  # every command
     if "ball_mass" in body_params:
         assert fast[0][0].metrics["ball_impulse"] > 0  # the ball hit: its contacts were in the robot's points
+
+
+def test_the_ticks_vectorised_motor_power_is_the_per_step_dot_bit_for_bit():
+    """``_motor_powers`` (one sum per tick, issue 31) gives each step's ``MOTOR @ tau**2`` float for float: torques of
+    every size and sign, 4 steps a tick as the humanoid takes them, and other counts."""
+    rng = np.random.default_rng(31)
+    for steps in (4, 4, 4, 1, 7):
+        for _ in range(2000):
+            torques = rng.normal(0.0, 3.0, size=(steps, len(MOTOR))) * rng.uniform(0.0, 2.0, size=(steps, 1))
+            per_step = [float(MOTOR @ tau**2) for tau in torques]
+            assert _motor_powers(torques.tolist()) == per_step

@@ -68,12 +68,22 @@ initial state is V = q = 0, as in the author's code (digest §5).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 
 from .adaptation import AnkleCentres
 from .circuit import Circuit
+from .equations import (  # noqa: F401 - the cell equations, importable from here as before
+    _logistic,
+    averaged_input,
+    fast_current,
+    motor_neuron,
+    pattern_formation,
+    rhythm_generator,
+    sensory_neuron,
+    sigmoid,
+    slow_steady_state,
+)
+from .events import PhaseResetEvent, ResetTrigger, SwitchEvent
 from .terrain import DETECTORS, TerrainSwitch, TerrainSwitchEvent, TerrainThreshold, Watch, Watcher, make_detector
 
 #: ``np.dot``'s C function without its ``__array_function__`` dispatch (a Python call per use, about 0.3 us: 50 uses per
@@ -84,140 +94,7 @@ E, F = 0, 1  # side index: neuron 2 j + E is joint j's extensor chain, 2 j + F i
 TARGETS = ("PF_E", "PF_F", "MN_E", "MN_F")
 
 
-# --------------------------------------------------------------------------------------------
-# The cell equations, readable (the vectorised step below computes exactly these)
-# --------------------------------------------------------------------------------------------
-
-
-def fast_current(V, sigma_f, A_f):
-    """(4.4) L1073: fast(V, sigma_f) = V - A_f tanh((sigma_f / A_f) V)."""
-    return V - A_f * np.tanh((sigma_f / A_f) * V)
-
-
-def slow_steady_state(V, sigma_in, sigma_out, E_s):
-    """(4.6) L1081 / (4.8) L1089: q_inf = sigma (V - E_s), sigma = sigma_in below E_s, sigma_out above
-    (both = sigma_s for (4.6))."""
-    return np.where(V < E_s, sigma_in, sigma_out) * (V - E_s)
-
-
-def rhythm_generator(V, q, i_inj, sigma_s, sigma_f, tau_m, tau_s, A_f, E_s):
-    """Time derivatives (dV/dt, dq/dt) of the Rowat-Selverston cell, 1/s.
-
-    (4.1) L1065: tau_m dV/dt = -(fast(V, sigma_f) + q - i_inj)
-    (4.2) L1067: tau_s dq/dt = -q + q_inf(V)"""
-    dV = -(fast_current(V, sigma_f, A_f) + q - i_inj) / tau_m
-    dq = (-q + slow_steady_state(V, sigma_s, sigma_s, E_s)) / tau_s
-    return dV, dq
-
-
-def sigmoid(x):
-    """1 / (1 + exp(-x)), written as (1 + tanh(x / 2)) / 2 so that it cannot overflow."""
-    return 0.5 * (1.0 + np.tanh(0.5 * x))
-
-
-def _logistic(half_slope, x):
-    """sigmoid(2 half_slope x), in place on ``x`` (a fresh array): the hot path's form of (4.9), (4.11), (4.13). The
-    same numbers as ``sigmoid``: halving is exact in floating point, so 0.5 (a x) = (0.5 a) x."""
-    np.multiply(x, half_slope, out=x)
-    np.tanh(x, out=x)
-    x += 1.0
-    x *= 0.5
-    return x
-
-
-def pattern_formation(I, alpha, alpha_mlr, theta, theta_mlr):
-    """(4.9) L1108: PF = 1 / (1 + exp(alpha alpha_MLR ((theta + theta_MLR) - I)))."""
-    return sigmoid(alpha * alpha_mlr * (I - (theta + theta_mlr)))
-
-
-def motor_neuron(I, alpha, theta):
-    """(4.11) L1123: MN = 1 / (1 + exp(alpha (theta - I)))."""
-    return sigmoid(alpha * (I - theta))
-
-
-def sensory_neuron(phi, alpha, theta):
-    """(4.13) L1133: rho = 1 / (1 + exp(alpha (theta - phi))); phi an angle (rad) or a force (N)."""
-    return sigmoid(alpha * (phi - theta))
-
-
-def averaged_input(main_weight, main, sensory_weights, sensory, n):
-    """(4.10) L1110 / (4.12) L1125: I = (w main + sum_j w_j S_j) / (n + 1); ``sensory_weights`` is
-    (sensory neurons, neurons), ``n`` the number of sensory synapses of each neuron."""
-    drive = main_weight * main
-    if sensory_weights.size:
-        drive = drive + sensory @ sensory_weights
-    return drive / (n + 1)
-
-
-# --------------------------------------------------------------------------------------------
-# The network
-# --------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class SwitchEvent:
-    """A pattern switch that happened (§7.11): at ``time`` (s of CPG time, the start of the tick), the named joints
-    took ``patterns`` (sigma_s, sigma_f) with the kicks ``kicks`` (into RG-F: their signs are the directions used; per
-    switched copy, an array, when batch copies kicked differently), and the couplings between the joint pairs
-    ``inhibited`` were silenced; ``copies``: which batch copies switched. ``name``: the circuit switch's label (a
-    controller preset's name). ``kick_direction``: "fixed" or "motion"; with "motion", ``extension_rates`` holds each
-    joint's sign(gain) d angle / dt at the switch (rad/s, > 0: moving toward extension, so its kick was -|kick|)."""
-
-    time: float
-    patterns: dict[str, tuple[float, float]]
-    kicks: dict[str, float | np.ndarray]
-    inhibited: tuple[tuple[str, str], ...]
-    copies: np.ndarray
-    name: str | None = None
-    kick_direction: str = "fixed"
-    extension_rates: dict[str, float | np.ndarray] = field(default_factory=dict)
-
-
-@dataclass(frozen=True)
-class PhaseResetEvent:
-    """A phase reset that happened (§7.10): at ``time`` (s, the start of the tick), the circuit's ``phase_resets``
-    entry ``entry`` acted as ``mode`` ("pulse" or "state") in the batch copies ``copies``."""
-
-    time: float
-    entry: int
-    mode: str
-    copies: np.ndarray
-
-
-class ResetTrigger:
-    """When phase resets fire (§7.10), one column per ``phase_resets`` entry: its sensory neuron rising through
-    ``threshold`` (below it last tick, at or above it now), once per landing: not within ``refractory`` s of that
-    entry's last firing (a heel bouncing), not before ``after`` s of trial time (the start-up transient). The network
-    and ``calibrate.py`` (which records the gait's state at these instants) share it: the same rule for both."""
-
-    def __init__(self, threshold, refractory, after, batch: int) -> None:
-        self.threshold = np.asarray(threshold, dtype=float)
-        self.refractory = np.asarray(refractory, dtype=float)
-        self.after = np.asarray(after, dtype=float)
-        self.batch = batch
-        self._gated = bool(np.any(self.refractory > 0) or np.any(self.after > 0))  # else a bare rising edge
-        self.reset()
-
-    def reset(self) -> None:
-        self._previous: np.ndarray | None = None  # which sensors were at or above threshold last tick
-        self._last = np.full((self.batch, len(self.threshold)), -np.inf)  # s: each entry's last firing
-
-    def __call__(self, rho: np.ndarray, time: float, enabled=True) -> np.ndarray | None:
-        """``rho``: (batch, entries), the sensory neurons of this tick; ``time``: s, the tick's start. Which entries
-        fire, (batch, entries) booleans, or None when none does (the common case, kept cheap)."""
-        above = rho >= self.threshold
-        previous, self._previous = self._previous, above
-        if previous is None:
-            return None
-        rising = above & ~previous & enabled
-        if not rising.any():
-            return None
-        if self._gated:
-            rising &= (time >= self.after - 1e-9) & (time - self._last >= self.refractory - 1e-9)
-            if not rising.any():
-                return None
-            self._last[rising] = time
-        return rising
+# The cell equations are in equations.py; the events and the reset trigger in events.py.
 
 
 class CPGNetwork:
@@ -226,7 +103,25 @@ class CPGNetwork:
     ``batch=None`` (the default) is one network whose accessors return arrays without the batch axis.
     Per-copy parameters (``set_pattern``, ``set_descending``) may differ between copies."""
 
-    def __init__(self, circuit: Circuit, batch: int | None = None) -> None:
+    #: how ``advance`` integrates: "numpy" (``_integrate``, the default) or "numba" (``compiled.py``, the same RK4
+    #: compiled, the ``fast`` extra; within 1e-9 of numpy's commands, issue 31)
+    KERNELS = ("numpy", "numba")
+
+    def __init__(self, circuit: Circuit, batch: int | None = None, kernel: str = "numpy") -> None:
+        if kernel not in self.KERNELS:
+            raise ValueError(f"kernel: expected one of {list(self.KERNELS)}; got {kernel!r}")
+        self._rk4_compiled = None
+        if kernel == "numba":
+            try:
+                from .compiled import rk4_steps
+            except ImportError as exc:
+                raise ValueError(
+                    f"kernel 'numba': numba is not installed ({exc}); pip install -e '.[fast]', or kernel 'numpy'"
+                ) from None
+            from .compiled import layers
+
+            self._rk4_compiled, self._layers_compiled = rk4_steps, layers
+        self.kernel = kernel
         self.circuit = circuit
         self.batched = batch is not None
         self.batch = batch or 1
@@ -345,6 +240,7 @@ class CPGNetwork:
         self._combined = np.zeros(b * 2 * n)
         # y(t + h) = y + h/6 (k1 + 2 k2 + 2 k3 + k4) = y + (h/2 k1)/3 + 2 (h/2 k2)/3 + (h k3)/3 + (h k4)/6
         self._rk4_weights = np.array([1.0 / 3.0, 2.0 / 3.0, 1.0 / 3.0, 1.0 / 6.0])
+        self._no_constant = np.zeros((b, 2 * n))  # the compiled kernel's constants on a tick without any
         self.reset(0)
 
     # ---------------------------------------------------------------- parameters
@@ -378,6 +274,11 @@ class CPGNetwork:
         self._slow_constant = -self.sigma_s * self.E_s / self.tau_s  # -sigma_s E_s / tau_s (4.6)
         self._has_slow_constant = bool(np.any(self._slow_constant))
         self._split = bool(np.any(self.sigma_in != self.sigma_s) or np.any(self.sigma_out != self.sigma_s))
+        # the couplings by target cell for the compiled kernel: cell i's sources and weights at [rows[i], rows[i + 1])
+        targets, sources = np.nonzero(self.coupling)
+        self._coupling_rows = np.searchsorted(targets, np.arange(n + 1)).astype(np.int64)
+        self._coupling_sources = sources.astype(np.int64)
+        self._coupling_weights = self.coupling[targets, sources]
 
     def _update_pattern_formation(self) -> None:
         """The PF constants of (4.9) as the step uses them: slope alpha alpha_MLR, centre theta + theta_MLR (during
@@ -812,6 +713,30 @@ class CPGNetwork:
             dot(weights, all_increments, combined)
             add(y, y_combined, y)
 
+    def _integrate_compiled(self, h: float, substeps: int) -> None:
+        """``_integrate`` in one call of the compiled kernel (``kernel="numba"``, compiled.py)."""
+        constant = self._constant
+        if constant is None:
+            constant = self._no_constant
+        self._rk4_compiled(
+            self.y,
+            h,
+            substeps,
+            float(self.tau_m),
+            float(self.tau_s),
+            float(self.A_f),
+            float(self.E_s),
+            self.sigma_s,
+            self.sigma_f,
+            self.sigma_in,
+            self.sigma_out,
+            self._split,
+            self._coupling_rows,
+            self._coupling_sources,
+            self._coupling_weights,
+            constant,
+        )
+
     def advance(self, sensors=None, control_dt: float = 0.01, substeps: int = 10) -> np.ndarray:
         """One control tick: sample the sensors, apply triggers and pulses, integrate ``control_dt`` s in
         ``substeps`` RK4 steps (h = 1 ms by default), then compute PF and MN.
@@ -842,7 +767,10 @@ class CPGNetwork:
         if self._watcher is not None:
             self._watcher.tick(phi, self.time, control_dt)
         self._constant = self._per_tick_constant()
-        self._integrate(control_dt / substeps, substeps)
+        if self._rk4_compiled is not None:
+            self._integrate_compiled(control_dt / substeps, substeps)
+        else:
+            self._integrate(control_dt / substeps, substeps)
         self.tick += 1
         self.time = self.tick * control_dt
         if self._pulsing:
@@ -864,6 +792,23 @@ class CPGNetwork:
         """PF (4.9)-(4.10) and MN (4.11)-(4.12) from V at the end of the tick and the sampled sensory neurons: the same
         as ``averaged_input``, ``pattern_formation`` and ``motor_neuron``, with the constants prepared once."""
         self._sensory = rho
+        if self._rk4_compiled is not None:  # kernel numba: the same layers compiled (compiled.py ``layers``)
+            self._pf, self._mn = self._layers_compiled(
+                rho,
+                self.y[:, 0],
+                self._w_sensory,
+                self._w_rg2pf,
+                self._pf_bounded,
+                float(self.A_f),
+                self._pf_divisor,
+                self._pf_half_slope,
+                self._pf_centre,
+                self._w_pf2mn,
+                self._mn_divisor,
+                float(self._mn_half_slope),
+                float(self.mn_theta),
+            )
+            return
         n = self.n_neurons
         drive = rho @ self._w_sensory  # sum_j w_j S_j of (4.10) in [:, :n], of (4.12) in [:, n:]
         rg = self.y[:, 0]
