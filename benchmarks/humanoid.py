@@ -13,7 +13,7 @@ the rounds, ratios medians of the ratios within each round; the load average is 
 (b) the default gait: ``CPGController`` with the ``humanoid_nao`` circuit in the body's process (``InProcessLink``),
     the trial as ``sfl run`` runs it with ``colocate: true``; (a), (a') and (b) run on the core (c) places its pair on,
     so that all meet the same neighbours on a busy machine;
-(c) the same trial with controller and body each hosted in its own process by ``sfl_brain.host``, as ``sfl run`` hosts
+(c) the same trial with controller and body each hosted in its own process by ``runtime.host``, as ``sfl run`` hosts
     them: placed as ``lockstep.pin_cpus`` ``--pin`` says (default ``auto``: both on one core, blocking), their frames
     and commands on their socket link (``lockstep.link: socket``); the trial is a request from this process,
     timed from request to reply;
@@ -45,13 +45,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import HostedPair, Pinned  # noqa: E402
 from _floor import machine_load  # noqa: E402
 
-from sfl_brain import bus  # noqa: E402
 from sfl_brain.bodies.humanoid import JOINT_NAMES, Humanoid  # noqa: E402
 from sfl_brain.bodies.humanoid_table import STANDING  # noqa: E402
 from sfl_brain.body import Controller, InProcessLink  # noqa: E402
-from sfl_brain.host import request  # noqa: E402
 from sfl_brain.messages import TrialRequest  # noqa: E402
 from sfl_brain.modules.controllers.cpg import CPGController, CPGParams  # noqa: E402
+from sfl_brain.runtime import bus  # noqa: E402
+from sfl_brain.runtime.host import request  # noqa: E402
 from sfl_brain.scenario import load  # noqa: E402
 
 #: the body's poll for each command in the humanoid's scenario (us), the benchmark's default
@@ -224,7 +224,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
 
 
 def pairs_where(mode: str) -> str:
-    from sfl_brain.placement import Pair, place, usable_cpus
+    from sfl_brain.runtime.placement import Pair, place, usable_cpus
 
     return place([Pair("body", "controller")], [], usable_cpus(), mode).reason
 
