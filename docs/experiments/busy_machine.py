@@ -35,9 +35,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from sfl_brain.runtime.placement import usable_cpus  # noqa: E402
 from sfl_brain.recording.provenance import made_here  # noqa: E402
 from sfl_brain.recording.records import read_records  # noqa: E402
+from sfl_brain.runtime.placement import usable_cpus  # noqa: E402
 
 #: the learn runs: scenario and overrides of each body
 BODIES = {
