@@ -1179,68 +1179,116 @@ def restart_policy(spec: ModuleSpec, cls: type[Module]) -> str:
     return "on-failure" if issubclass(cls, Body | Controller) else "never"
 
 
+#: a module's resolved class, its reference (``package.module:Class``) and its validated parameters (JSON)
+ModuleClass = tuple[type[Module], str, dict]
+
+
 def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
+    """The plan of the scenario ``raw`` (read from ``file``; relative paths from ``base_dir``): every module resolved
+    and its parameters checked, the wiring checked, the instances made. Every problem found at one stage is raised
+    together, as a :class:`ScenarioError`, before the next stage."""
     raw, problems = learnt_values(raw, base_dir)
-    if problems:
-        raise ScenarioError(file, problems)
+    raise_if(file, problems)
     try:
         scenario = ScenarioModel.model_validate(raw)
     except ValidationError as exc:
         raise ScenarioError(file, problems_from(exc, ScenarioModel)) from None
-    problems: list[Problem] = []
-    classes: dict[str, tuple[type[Module], str, dict]] = {}
-    dim = len(scenario.space)
-    if scenario.protocol.kind == "learn" and (library := NEEDS.get(scenario.protocol.proposer.kind)):
-        import importlib.util
+    classes, problems = module_classes(scenario, base_dir)
+    raise_if(file, proposer_problems(scenario) + problems)
 
-        if importlib.util.find_spec(library) is None:
-            problems.append(
-                Problem(
-                    "protocol.proposer.kind",
-                    f"expected a proposer whose library is installed: {scenario.protocol.proposer.kind!r} needs "
-                    f"{library!r} (pip install 'sfl-brain[baselines]'); got {scenario.protocol.proposer.kind!r}",
-                )
-            )
-    for name, spec in scenario.modules.items():
-        where = f"modules.{name}"
-        try:  # an import that does not finish within timeouts.ready would not start either
-            cls, reference = resolve(spec.impl, base_dir, timeout=scenario.timeouts.ready)
-        except ImplError as exc:
-            problems.append(Problem(f"{where}.impl", str(exc), exc.suggestion))
-            continue
-        if not (isinstance(cls.Params, type) and issubclass(cls.Params, BaseModel)):
-            problems.append(Problem(f"{where}.impl", f"{cls.__name__}.Params is not a pydantic model (ModuleParams)"))
-            continue
-        if spec.restart == "on-failure" and not issubclass(cls, Body | Controller):
-            problems.append(
-                Problem(
-                    f"{where}.restart",
-                    f"expected 'never' for {cls.__name__}: only bodies and controllers are restarted "
-                    "(a brain module holds learnt state that a restart would lose); got 'on-failure'",
-                )
-            )
-        params = dict(spec.params)
-        if "dim" in cls.Params.model_fields and params.get("dim") is None:
-            params["dim"] = dim
-        try:  # as JSON: strict (no "40" or true for a number) yet lists for tuples
-            validated = cls.Params.model_validate_json(json.dumps(params, allow_nan=False), strict=True)
-        except ValidationError as exc:
-            problems.extend(problems_from(exc, cls.Params, (where, "params")))
-            continue
-        except Exception as exc:  # a validator of a module's own that raises something else
-            problems.append(Problem(f"{where}.params", f"{cls.__name__}.Params failed: {type(exc).__name__}: {exc}"))
-            continue
-        if spec.workers > 1 and not issubclass(cls, Body):
-            problems.append(Problem(f"{where}.workers", f"expected 1 for a non-body module; got {spec.workers}"))
-        if spec.colocate and not issubclass(cls, Controller):
-            problems.append(Problem(f"{where}.colocate", "only controllers can be colocated with a body"))
-        classes[name] = (cls, reference, validated.model_dump(mode="json"))
+    providers, problems = handlers(classes, scenario.protocol.kind)
+    body_name, controller_name, pair_problems = lockstep_pair(classes)
+    problems += pair_problems
+    problems += target_problems(scenario, classes, body_name, controller_name)
+    if scenario.protocol.kind == "exploit":
+        classes, exploit_problems = with_exploit_maps(scenario, base_dir, classes, providers)
+        problems += exploit_problems
+    raise_if(file, problems)
 
+    instances, body_instances = make_instances(scenario, classes, providers, body_name, controller_name)
+    return Plan(file, scenario, raw, instances, providers, body_instances, body_name)
+
+
+def raise_if(file: str, problems: list[Problem]) -> None:
+    """Raise the ``problems`` found in ``file``, if any, as one :class:`ScenarioError`."""
     if problems:
         raise ScenarioError(file, problems)
 
-    # --- wiring: every message the protocol or a body sends has exactly one handler -------------
+
+def proposer_problems(scenario: ScenarioModel) -> list[Problem]:
+    """A learn protocol's proposer whose library is not installed."""
+    if scenario.protocol.kind != "learn" or not (library := NEEDS.get(scenario.protocol.proposer.kind)):
+        return []
+    import importlib.util
+
+    if importlib.util.find_spec(library) is not None:
+        return []
+    kind = scenario.protocol.proposer.kind
+    return [
+        Problem(
+            "protocol.proposer.kind",
+            f"expected a proposer whose library is installed: {kind!r} needs "
+            f"{library!r} (pip install 'sfl-brain[baselines]'); got {kind!r}",
+        )
+    ]
+
+
+def module_classes(scenario: ScenarioModel, base_dir: Path) -> tuple[dict[str, ModuleClass], list[Problem]]:
+    """Each module's class, reference and validated parameters, and the problems of those that have none."""
+    classes: dict[str, ModuleClass] = {}
+    problems: list[Problem] = []
+    for name, spec in scenario.modules.items():
+        found = module_class(f"modules.{name}", spec, scenario, base_dir, problems)
+        if found is not None:
+            classes[name] = found
+    return classes, problems
+
+
+def module_class(
+    where: str, spec: ModuleSpec, scenario: ScenarioModel, base_dir: Path, problems: list[Problem]
+) -> ModuleClass | None:
+    """The module at ``where``: its class resolved, its parameters validated (``dim`` from the space when it takes one
+    and the file leaves it out), its restart, workers and colocation checked against its kind. Problems are appended
+    to ``problems``; None when there is no class or no valid parameters."""
+    try:  # an import that does not finish within timeouts.ready would not start either
+        cls, reference = resolve(spec.impl, base_dir, timeout=scenario.timeouts.ready)
+    except ImplError as exc:
+        problems.append(Problem(f"{where}.impl", str(exc), exc.suggestion))
+        return None
+    if not (isinstance(cls.Params, type) and issubclass(cls.Params, BaseModel)):
+        problems.append(Problem(f"{where}.impl", f"{cls.__name__}.Params is not a pydantic model (ModuleParams)"))
+        return None
+    if spec.restart == "on-failure" and not issubclass(cls, Body | Controller):
+        problems.append(
+            Problem(
+                f"{where}.restart",
+                f"expected 'never' for {cls.__name__}: only bodies and controllers are restarted "
+                "(a brain module holds learnt state that a restart would lose); got 'on-failure'",
+            )
+        )
+    params = dict(spec.params)
+    if "dim" in cls.Params.model_fields and params.get("dim") is None:
+        params["dim"] = len(scenario.space)
+    try:  # as JSON: strict (no "40" or true for a number) yet lists for tuples
+        validated = cls.Params.model_validate_json(json.dumps(params, allow_nan=False), strict=True)
+    except ValidationError as exc:
+        problems.extend(problems_from(exc, cls.Params, (where, "params")))
+        return None
+    except Exception as exc:  # a validator of a module's own that raises something else
+        problems.append(Problem(f"{where}.params", f"{cls.__name__}.Params failed: {type(exc).__name__}: {exc}"))
+        return None
+    if spec.workers > 1 and not issubclass(cls, Body):
+        problems.append(Problem(f"{where}.workers", f"expected 1 for a non-body module; got {spec.workers}"))
+    if spec.colocate and not issubclass(cls, Controller):
+        problems.append(Problem(f"{where}.colocate", "only controllers can be colocated with a body"))
+    return cls, reference, validated.model_dump(mode="json")
+
+
+def handlers(classes: dict[str, ModuleClass], kind: str) -> tuple[dict[str, str], list[Problem]]:
+    """Which module handles each message tag (the first, for the tags every body worker or controller handles), and
+    the problems: a tag two modules handle, a message protocol ``kind`` sends that no module handles."""
     providers: dict[str, str] = {}
+    problems: list[Problem] = []
     for name, (cls, _, _) in classes.items():
         for message_type in cls.handles:
             if message_type.TAG in providers and message_type not in (
@@ -1256,7 +1304,6 @@ def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
                     )
                 )
             providers.setdefault(message_type.TAG, name)
-    kind = scenario.protocol.kind
     for message_type, why in PROTOCOL_NEEDS[kind]:
         if message_type.TAG not in providers:
             family = message_type.TAG.split(".")[0]
@@ -1268,6 +1315,14 @@ def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
                     f"{family}: {{impl: {HINT_IMPL.get(family, family)}}}",
                 )
             )
+    return providers, problems
+
+
+def lockstep_pair(classes: dict[str, ModuleClass]) -> tuple[str, str, list[Problem]]:
+    """The body's and the controller's module names ("" for none), and the problems of the pair: more than one of
+    either, a body that sends commands without a controller or a controller for a body that takes none, a controller
+    whose sensors and commands do not fit its body's."""
+    problems: list[Problem] = []
     bodies = [n for n, (c, _, _) in classes.items() if issubclass(c, Body)]
     controllers = [n for n, (c, _, _) in classes.items() if issubclass(c, Controller)]
     if len(bodies) > 1:
@@ -1276,46 +1331,48 @@ def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
         problems.append(Problem("modules", f"expected at most one controller; got {controllers}"))
     body_name = bodies[0] if bodies else ""
     controller_name = controllers[0] if controllers else ""
-    if body_name:
-        body_cls = classes[body_name][0]
-        if body_cls.COMMANDS and not controller_name:
-            problems.append(
-                Problem(
-                    f"modules.{body_name}",
-                    f"body `{body_cls.__name__}` sends `controller.sensors` and needs a "
-                    "controller; no module handles it",
-                    "controller: {impl: reflex}",
-                )
+    if not body_name:
+        return body_name, controller_name, problems
+    body_cls = classes[body_name][0]
+    if body_cls.COMMANDS and not controller_name:
+        problems.append(
+            Problem(
+                f"modules.{body_name}",
+                f"body `{body_cls.__name__}` sends `controller.sensors` and needs a controller; no module handles it",
+                "controller: {impl: reflex}",
             )
-        if controller_name:
-            ctrl_cls = classes[controller_name][0]
-            if not body_cls.COMMANDS:
-                problems.append(
-                    Problem(
-                        f"modules.{controller_name}",
-                        f"body `{body_name}` takes no commands; a controller is not used",
-                    )
-                )
-            else:
-                try:
-                    params = ctrl_cls.Params(**classes[controller_name][2])
-                    ctrl_cls.wire(
-                        body_cls.SENSORS,
-                        body_cls.COMMANDS,
-                        body=f"body `{body_name}` ({body_cls.__name__})",
-                        params=params,
-                    )
-                except WiringError as exc:
-                    problems.append(Problem(f"modules.{controller_name}", str(exc)))
+        )
+    if controller_name and not body_cls.COMMANDS:
+        problems.append(
+            Problem(f"modules.{controller_name}", f"body `{body_name}` takes no commands; a controller is not used")
+        )
+    elif controller_name:
+        ctrl_cls = classes[controller_name][0]
+        try:
+            params = ctrl_cls.Params(**classes[controller_name][2])
+            ctrl_cls.wire(
+                body_cls.SENSORS, body_cls.COMMANDS, body=f"body `{body_name}` ({body_cls.__name__})", params=params
+            )
+        except WiringError as exc:
+            problems.append(Problem(f"modules.{controller_name}", str(exc)))
+    return body_name, controller_name, problems
 
-    # --- targets of axes and conditions exist ----------------------------------------------------
+
+def target_problems(
+    scenario: ScenarioModel, classes: dict[str, ModuleClass], body_name: str, controller_name: str
+) -> list[Problem]:
+    """The problems of every trial parameter the scenario sets (the space's axes, its conditions and a conditions
+    protocol's conditions, grid and follow): a target that is not ``body.<param>`` or ``controller.<param>`` of a
+    module the scenario has, a parameter the module does not take, a value its check refuses. A conditions protocol's
+    own problems come first."""
+    problems: list[Problem] = []
     owners = {
         "body": classes[body_name][0] if body_name else None,
         "controller": classes[controller_name][0] if controller_name else None,
     }
     targets = [(f"space.{i}.target", a.target, (a.low, a.high)) for i, a in enumerate(scenario.space)]
     targets += [(f"conditions.{k}", k, (v,)) for k, v in scenario.conditions.items()]
-    if kind == "conditions":  # a conditions protocol's trial parameters, as the scenario's own conditions
+    if scenario.protocol.kind == "conditions":  # a conditions protocol's trial parameters, as the scenario's own
         proto = scenario.protocol
         problems += conditions_problems(proto)
         for i, analysis in enumerate(proto.analyses):
@@ -1362,41 +1419,56 @@ def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
                 except Exception as exc:
                     problems.append(Problem(where, str(exc) or type(exc).__name__))
                     break
-    if kind == "exploit":
-        names = [a.name for a in scenario.space]
-        if scenario.protocol.condition not in names:
-            problems.append(
-                Problem(
-                    "protocol.condition",
-                    f"expected one of {names}; got {scenario.protocol.condition!r}",
-                    nearest(scenario.protocol.condition, names),
-                )
-            )
-        maps = Path(scenario.protocol.maps)
-        try:
-            if not maps.is_absolute() and not maps.is_file():
-                maps = base_dir / maps
-            found = maps.is_file()
-        except (OSError, ValueError):  # a name too long, a NUL byte
-            found = False
-        if not found:
-            problems.append(Problem("protocol.maps", f"expected an ACC checkpoint file; {maps} does not exist"))
-        else:  # the module answering Exploit starts from these maps
-            exploit_by = providers.get(m.Exploit.TAG)
-            if exploit_by in classes and "restore" in classes[exploit_by][0].Params.model_fields:
-                cls_, ref_, params_ = classes[exploit_by]
-                classes[exploit_by] = (cls_, ref_, {**params_, "restore": str(maps.resolve())})
-    if problems:
-        raise ScenarioError(file, problems)
+    return problems
 
-    # --- instances --------------------------------------------------------------------------------
+
+def with_exploit_maps(
+    scenario: ScenarioModel, base_dir: Path, classes: dict[str, ModuleClass], providers: dict[str, str]
+) -> tuple[dict[str, ModuleClass], list[Problem]]:
+    """An exploit protocol's checks (its condition is an axis of the space, its ACC checkpoint exists), and the
+    classes with the module answering ``Exploit`` set to start from that checkpoint (``restore``)."""
+    problems: list[Problem] = []
+    names = [a.name for a in scenario.space]
+    if scenario.protocol.condition not in names:
+        problems.append(
+            Problem(
+                "protocol.condition",
+                f"expected one of {names}; got {scenario.protocol.condition!r}",
+                nearest(scenario.protocol.condition, names),
+            )
+        )
+    maps = Path(scenario.protocol.maps)
+    try:
+        if not maps.is_absolute() and not maps.is_file():
+            maps = base_dir / maps
+        found = maps.is_file()
+    except (OSError, ValueError):  # a name too long, a NUL byte
+        found = False
+    if not found:
+        problems.append(Problem("protocol.maps", f"expected an ACC checkpoint file; {maps} does not exist"))
+        return classes, problems
+    exploit_by = providers.get(m.Exploit.TAG)
+    if exploit_by in classes and "restore" in classes[exploit_by][0].Params.model_fields:
+        cls, reference, params = classes[exploit_by]
+        classes = {**classes, exploit_by: (cls, reference, {**params, "restore": str(maps.resolve())})}
+    return classes, problems
+
+
+def make_instances(
+    scenario: ScenarioModel,
+    classes: dict[str, ModuleClass],
+    providers: dict[str, str],
+    body_name: str,
+    controller_name: str,
+) -> tuple[list[Instance], list[str]]:
+    """The run's module instances, in the scenario's order (a body's controller just before each body worker, unless
+    colocated with it), and the body workers' names (``body``, or ``body.0``, ``body.1``, ... for several)."""
     instances: list[Instance] = []
-    routes = {tag: name for tag, name in providers.items()}
     body_instances: list[str] = []
     for name, spec in scenario.modules.items():
-        cls, reference, params = classes[name]
         if name == controller_name:
             continue  # created with each body worker
+        cls, reference, params = classes[name]
         count = spec.workers if name == body_name else 1
         for k in range(count):
             inst_name = name if count == 1 else f"{name}.{k}"
@@ -1409,29 +1481,41 @@ def build_plan(raw: dict, file: str, base_dir: Path) -> Plan:
                 instance_seed(scenario.seed, name),
                 restart_policy(spec, cls),
                 spec.max_restarts,
-                dict(routes),
+                dict(providers),
             )
             if name == body_name:
                 body_instances.append(inst_name)
                 if controller_name:
-                    cspec = scenario.modules[controller_name]
-                    ccls, cref, cparams = classes[controller_name]
-                    cname = controller_name if count == 1 else f"{controller_name}.{k}"
-                    ctrl = Instance(
-                        cname,
-                        controller_name,
-                        ccls,
-                        cref,
-                        cparams,
-                        instance_seed(scenario.seed, controller_name),
-                        restart_policy(cspec, ccls),
-                        cspec.max_restarts,
-                        {m.MotorCommand.TAG: inst_name},
-                    )
-                    inst.routes[m.SensorFrame.TAG] = cname
-                    if cspec.colocate:
-                        inst.colocated = ctrl
-                    else:
-                        instances.append(ctrl)
+                    attach_controller(scenario, classes, controller_name, inst, k if count > 1 else None, instances)
             instances.append(inst)
-    return Plan(file, scenario, raw, instances, providers, body_instances, body_name)
+    return instances, body_instances
+
+
+def attach_controller(
+    scenario: ScenarioModel,
+    classes: dict[str, ModuleClass],
+    controller_name: str,
+    body: Instance,
+    worker: int | None,
+    instances: list[Instance],
+) -> None:
+    """The controller instance of body worker ``body`` (number ``worker`` of several, or None): routed to that body
+    and it to the controller; colocated in the body's process, or appended to ``instances``."""
+    cspec = scenario.modules[controller_name]
+    ccls, cref, cparams = classes[controller_name]
+    ctrl = Instance(
+        controller_name if worker is None else f"{controller_name}.{worker}",
+        controller_name,
+        ccls,
+        cref,
+        cparams,
+        instance_seed(scenario.seed, controller_name),
+        restart_policy(cspec, ccls),
+        cspec.max_restarts,
+        {m.MotorCommand.TAG: body.name},
+    )
+    body.routes[m.SensorFrame.TAG] = ctrl.name
+    if cspec.colocate:
+        body.colocated = ctrl
+    else:
+        instances.append(ctrl)
