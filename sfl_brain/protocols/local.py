@@ -20,7 +20,8 @@ from ..module import Module
 from ..recording.records import RecordWriter, read_records, record_to
 from ..registry import resolve
 from ..scenario.plan import Instance, Plan
-from .conductor import PROTOCOLS, Conductor
+from . import PROTOCOLS
+from .conductor import Conductor
 from .service import Outcome
 
 

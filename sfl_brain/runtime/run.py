@@ -50,7 +50,8 @@ from ..events import (
     WorkerJoined,
     WorkerLeft,
 )
-from ..protocols.conductor import PROTOCOLS, Conductor
+from ..protocols import PROTOCOLS
+from ..protocols.conductor import Conductor
 from ..protocols.service import RunError
 from ..recording.provenance import provenance
 from ..recording.records import RecordWriter, read_records, record_to, run_status, summarise
