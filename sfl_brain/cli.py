@@ -9,7 +9,8 @@ from pathlib import Path
 import click
 
 from . import __version__
-from .scenario.plan import ScenarioError, load
+from .scenario.errors import ScenarioError
+from .scenario.plan import load
 from .status import EXIT_BAD_INPUT, EXIT_CODES, EXIT_ENVIRONMENT, BadInput, EnvironmentProblem, RunStatus
 
 

@@ -231,7 +231,9 @@ def conditions_section(scenario: dict, run_dirs: list[Path], left_out: list[str]
         elif analysis["kind"] == "trace":
             lines += trace_section(t, run_dirs, analysis, out, f"{name}_trace{k or ''}")
         elif analysis["kind"] == "pattern_space":
-            from ..scenario.plan import PatternSpaceAnalysis  # its defaults (the run folder keeps the file as written)
+            from ..scenario.schema import (
+                PatternSpaceAnalysis,  # its defaults (the run folder keeps the file as written)
+            )
 
             given = PatternSpaceAnalysis.model_validate(analysis).model_dump()
             lines += pattern_space_section(t, run_dirs, given, out, f"{name}_pattern_space{k or ''}")

@@ -57,7 +57,8 @@ from ..recording.provenance import provenance
 from ..recording.records import RecordWriter, read_records, record_to, run_status, summarise
 from ..recording.rrlog import RERUN_FLUSH_TIMEOUT, RerunLog, layout_of
 from ..recording.tables import write_tables
-from ..scenario.plan import Plan, ScenarioError, load
+from ..scenario.errors import ScenarioError
+from ..scenario.plan import Plan, load
 from ..status import EXIT_CODES, EXIT_ENVIRONMENT, BadInput, EnvironmentProblem, RunStatus
 from .processes import kill_quietly
 from .supervisor import Supervisor
