@@ -50,8 +50,8 @@ from sfl_brain.body import InProcessLink  # noqa: E402
 from sfl_brain.messages import ControllerReset, SensorFrame  # noqa: E402
 from sfl_brain.modules.controllers.open_loop import OpenLoopController  # noqa: E402
 from sfl_brain.runtime import bus  # noqa: E402
-from sfl_brain.runtime.host import BusLink, SocketLink  # noqa: E402
 from sfl_brain.runtime.placement import usable_cpus  # noqa: E402
+from sfl_brain.runtime.ticklink import BusLink, SocketLink  # noqa: E402
 
 SENSORS = ["hip_l", "hip_r", "knee_l", "knee_r", "contact_l", "contact_r", "slope", "pitch"]
 COMMANDS = ["v_hip_l", "v_hip_r", "v_knee_l", "v_knee_r"]

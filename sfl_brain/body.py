@@ -5,7 +5,7 @@ takes one control tick of commands, and says when the trial is over and how it
 went. A :class:`Controller` turns one tick of sensor values into one tick of
 commands. :meth:`Body.trial` runs them in lockstep through a *link*: the
 controller itself in the same process (:class:`InProcessLink`), or the same
-controller in another process (``sfl_brain.runtime.host.SocketLink`` or ``BusLink``). The loop
+controller in another process (``sfl_brain.runtime.ticklink.SocketLink`` or ``BusLink``). The loop
 is the same either way, so both give identical trial records.
 
 NaN or an infinity in a tick's sensor values, in a controller's command or in a

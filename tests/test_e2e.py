@@ -269,7 +269,7 @@ def test_buslink_times_out_when_no_controller_answers():
     import numpy as np
 
     from sfl_brain.messages import SensorFrame
-    from sfl_brain.runtime.host import BusLink, LinkError
+    from sfl_brain.runtime.ticklink import BusLink, LinkError
 
     session = bus.open_session([bus.free_endpoint()], [])
     link = BusLink(session, "lonely", "body", "controller", timeout=0.3)
@@ -328,7 +328,7 @@ def test_sessions_run_zenoh_on_one_runtime_thread_unless_the_user_says_otherwise
 
 
 def test_the_body_polls_for_commands_only_while_polling_makes_ticks_shorter():
-    from sfl_brain.runtime.host import SpinThenSleep
+    from sfl_brain.runtime.ticklink import SpinThenSleep
 
     def run(spin_tick, sleep_tick, ticks=1024):
         now = 0.0

@@ -191,8 +191,8 @@ def test_a_dead_brain_module_ends_the_run_naming_it(tmp_path):
 
 
 def test_retry_is_decided_by_the_remote_fault_type():
-    from sfl_brain.runtime.host import LinkError
     from sfl_brain.runtime.supervisor import remote_fault
+    from sfl_brain.runtime.ticklink import LinkError
 
     cut = remote_fault("body", "body.trial", f"{LinkError.__name__}: interrupted: no command for tick 5 within 1 s")
     assert type(cut) is Interrupted

@@ -152,7 +152,7 @@ def test_on_its_link_the_body_takes_only_its_trials_command_and_counts_the_rest(
 
     from sfl_brain.messages import ControllerReset, MotorCommand, SensorFrame, decode, encode
     from sfl_brain.runtime import bus
-    from sfl_brain.runtime.host import BusLink
+    from sfl_brain.runtime.ticklink import BusLink
 
     endpoint = bus.tick_endpoint(tmp_path, "0")
     mesh = bus.open_session([bus.free_endpoint()], [])
@@ -202,7 +202,7 @@ def test_on_its_socket_link_the_body_takes_only_its_trials_command_and_a_dead_co
 
     from sfl_brain.messages import ControllerReset, MotorCommand, SensorFrame, decode, encode
     from sfl_brain.runtime import bus, ticklink
-    from sfl_brain.runtime.host import LinkError, SocketLink
+    from sfl_brain.runtime.ticklink import LinkError, SocketLink
 
     endpoint = ticklink.endpoint(tmp_path, "0")
     mesh = bus.open_session([bus.free_endpoint()], [])

@@ -317,3 +317,11 @@ class Drops:
             tmp = path.with_name(path.name + ".tmp")
             tmp.write_text(json.dumps({"dropped": counts}, indent=1) + "\n")
             os.replace(tmp, path)
+
+
+class RemoteError(RuntimeError):
+    """A module answered a request with an error, or nobody answered."""
+
+
+class NoReply(RemoteError):
+    """Nobody answered a request within its timeout."""

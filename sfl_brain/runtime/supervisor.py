@@ -18,7 +18,7 @@ The Zenoh sessions of the run's own processes have a lease of a day (:data:`bus.
 test on one machine. A worker on another machine (``sfl worker``) cannot be seen: its own lease (``timeouts.lease``)
 is the test, and ``timeouts.trial`` of wall time caps its trial.
 
-Faults are types. A request whose target exits, leaves, or answers with a :class:`~sfl_brain.runtime.host.LinkError`
+Faults are types. A request whose target exits, leaves, or answers with a :class:`~sfl_brain.runtime.ticklink.LinkError`
 (its controller died or hung mid-trial) ends :class:`~sfl_brain.protocols.service.Interrupted`: the protocol may
 send it again. Bodies and controllers may be restarted by policy (they hold no state between
 trials); a brain module that dies ends the run with :class:`~sfl_brain.protocols.service.RunError`, naming it
@@ -68,10 +68,10 @@ from ..protocols.service import Interrupted, Outcome, RunError
 from ..scenario.plan import Instance, Plan
 from ..status import EnvironmentProblem
 from . import bus, processes, ticklink
-from .host import WATCHED_WAIT, ControllerHung, LinkError
 from .liveness import NoProgressClock, ProgressBoard, cpu_sample
 from .placement import BUSY, CoreWatch, Pair, Placement, core_load, pin_process, place, usable_cpus
 from .processes import Child, Exited, kill_quietly, log_tail
+from .ticklink import WATCHED_WAIT, ControllerHung, LinkError
 
 __all__ = ["RUN_TOKEN", "Interrupted", "RunError", "Supervisor", "hosted_spec", "kill_quietly", "log_tail"]
 
@@ -122,7 +122,7 @@ class QueryEnded:
 
 @dataclass(frozen=True)
 class HungController:
-    """Body worker ``body`` found its controller process hung (:class:`~sfl_brain.runtime.host.ControllerHung`)."""
+    """Body worker ``body`` found its controller process hung (:class:`~sfl_brain.runtime.ticklink.ControllerHung`)."""
 
     body: str
 

@@ -352,7 +352,7 @@ class Timeouts(Strict):
 
 class Lockstep(Strict):
     """How a body worker and its controller process exchange their ticks (see sfl_brain.runtime.placement
-    and sfl_brain.runtime.host.SpinThenSleep)."""
+    and sfl_brain.runtime.ticklink.SpinThenSleep)."""
 
     spin_us: float = Field(
         200.0,
