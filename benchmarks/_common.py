@@ -17,7 +17,7 @@ def stats(samples_s) -> str:
 
 def spawn_host(spec: dict) -> subprocess.Popen:
     return subprocess.Popen(
-        [sys.executable, "-m", "sfl_brain.host", json.dumps(spec)],
+        [sys.executable, "-m", "sfl_brain.runtime.host", json.dumps(spec)],
         stdin=subprocess.PIPE,
         stderr=subprocess.DEVNULL,
     )
@@ -52,7 +52,7 @@ def controller_spec(run_id: str, reference: str, endpoint: str, cpus: list[int] 
 
 
 class HostedPair:
-    """A body and its controller, each hosted by ``sfl_brain.host`` in a process of its own, as ``sfl run``
+    """A body and its controller, each hosted by ``sfl_brain.runtime.host`` in a process of its own, as ``sfl run``
     hosts a body worker and its controller process: placed as ``lockstep.pin_cpus`` ``pin`` places them
     (or ``apart``: a core each, as ``pin_cpus: always`` did before issue 24), their frames and commands
     on a lockstep link of their own (``link`` "socket", as ``sfl run`` by default, or "zenoh": a Zenoh
@@ -74,9 +74,9 @@ class HostedPair:
         body_params: dict | None = None,
         spin: float = 0.0,
     ) -> None:
-        from sfl_brain import bus
         from sfl_brain.messages import SensorFrame
-        from sfl_brain.placement import Pair, Placement, place, usable_cpus
+        from sfl_brain.runtime import bus
+        from sfl_brain.runtime.placement import Pair, Placement, place, usable_cpus
 
         if pin == "apart":  # a core each, as lockstep.pin_cpus always placed a pair before issue 24
             cpus = usable_cpus()
@@ -84,7 +84,7 @@ class HostedPair:
             self.placement = Placement("apart", tuple(cpus), cores, "body and controller on a core each")
         else:
             self.placement = place([Pair("body", "controller")], [], usable_cpus(), pin)
-        from sfl_brain import ticklink
+        from sfl_brain.runtime import ticklink
 
         self.link = link
         endpoints = {"socket": ticklink.endpoint, "zenoh": bus.tick_endpoint}
@@ -125,13 +125,13 @@ class Pinned:
         self.cores = cores
 
     def __enter__(self):
-        from sfl_brain.placement import pin, usable_cpus
+        from sfl_brain.runtime.placement import pin, usable_cpus
 
         self.before = usable_cpus()
         pin(self.cores)
         return self
 
     def __exit__(self, *exc):
-        from sfl_brain.placement import pin
+        from sfl_brain.runtime.placement import pin
 
         pin(self.before)

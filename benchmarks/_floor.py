@@ -7,7 +7,7 @@ between the variants:
 
 * ``pipe``: an OS pipe each way, both blocking in ``read``: the cheapest blocking hand-over there is;
 * ``socket``: a Unix ``SOCK_SEQPACKET`` socket pair, both blocking in ``recv``: the transport of
-  ``lockstep.link: socket`` (``sfl_brain.ticklink``), bare;
+  ``lockstep.link: socket`` (``sfl_brain.runtime.ticklink``), bare;
 * ``shm``: a shared-memory sequence number each way, both spinning: no wake-up at all, but each
   side holds a core (on a shared core, or beside a busy process, it starves the other); the
   controller spins only while the body runs ticks, and sleeps in between (it must not be a busy
@@ -71,7 +71,7 @@ def one_process(ticks: int, tick, controller_n: int = 0) -> float:
 PREAMBLE = textwrap.dedent("""
     import json, os, sys, threading, time
     sys.path.insert(0, {root!r})
-    from sfl_brain.placement import pin
+    from sfl_brain.runtime.placement import pin
     pin(json.loads(sys.argv[1]))
     PARENT = os.getppid()
     def orphaned():
@@ -117,7 +117,7 @@ PONG_SHM = textwrap.dedent("""
 """)
 PONG_ZENOH = textwrap.dedent("""
     import zenoh
-    from sfl_brain import bus
+    from sfl_brain.runtime import bus
     os.environ.setdefault("ZENOH_RUNTIME", bus.RUNTIME)
     link, typed = sys.argv[2], sys.argv[4] == "typed"
     conf = bus.config([], [sys.argv[3]]) if link == "mesh" else bus.tick_config([], [sys.argv[3]])
@@ -143,7 +143,7 @@ PONG_ZENOH = textwrap.dedent("""
 """)
 PONG_SOCKET = textwrap.dedent("""
     import socket
-    sock = socket.socket(fileno=int(sys.argv[2]))  # AF_UNIX, SOCK_SEQPACKET: as sfl_brain.ticklink
+    sock = socket.socket(fileno=int(sys.argv[2]))  # AF_UNIX, SOCK_SEQPACKET: as sfl_brain.runtime.ticklink
     typed = sys.argv[3] == "typed"
     reply = b"c" * {command}
     if typed:  # the framework's codec and the open-loop controller, by hand (no host, no checks)
@@ -273,7 +273,7 @@ class Pair:
         else:
             import zenoh
 
-            from sfl_brain import bus
+            from sfl_brain.runtime import bus
 
             link = kind.split("-")[1]
             self.typed = kind.endswith("-typed")

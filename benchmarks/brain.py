@@ -17,10 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-from sfl_brain.local import run_local
 from sfl_brain.messages import Evaluate
 from sfl_brain.modules.acc import ACC
-from sfl_brain.run import run
+from sfl_brain.protocols.local import run_local
+from sfl_brain.runtime.run import run
 from sfl_brain.scenario import load
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -16,11 +16,11 @@ median over ``--repeats`` rounds of the variant's time over the one-process time
     (TCP) on two cores and on one core, and on the lockstep link's configuration (lowlatency
     transport, QoS off, a Unix socket; ``bus.tick_config``) on one core;
 (socket) a Unix ``SOCK_SEQPACKET`` socket pair, both blocking, on one core: the transport of
-    ``lockstep.link: socket`` (``sfl_brain.ticklink``), bare;
+    ``lockstep.link: socket`` (``sfl_brain.runtime.ticklink``), bare;
 (typed by hand) bare Zenoh on the lockstep link, and the bare socket, with the framework's codec and the
     open-loop controller written by hand (no host, no link, no checks): what the messages cost, apart
     from the runtime;
-(framework) the body's link to an open-loop controller hosted by ``sfl_brain.host``, typed, encoded,
+(framework) the body's link to an open-loop controller hosted by ``sfl_brain.runtime.host``, typed, encoded,
     checked, dispatched: as ``sfl run`` runs a pair now (both on one core, blocking, ``SocketLink`` on
     their socket link), with ``lockstep.link: zenoh`` (``BusLink`` on a Zenoh lowlatency session), and
     as before issue 24 (not pinned, ticks on the mesh, the body polling up to ``--spin-us``);
@@ -46,12 +46,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _floor  # noqa: E402
 from _common import HostedPair, Pinned  # noqa: E402
 
-from sfl_brain import bus  # noqa: E402
 from sfl_brain.body import InProcessLink  # noqa: E402
-from sfl_brain.host import BusLink, SocketLink  # noqa: E402
 from sfl_brain.messages import ControllerReset, SensorFrame  # noqa: E402
 from sfl_brain.modules.controllers.open_loop import OpenLoopController  # noqa: E402
-from sfl_brain.placement import usable_cpus  # noqa: E402
+from sfl_brain.runtime import bus  # noqa: E402
+from sfl_brain.runtime.placement import usable_cpus  # noqa: E402
+from sfl_brain.runtime.ticklink import BusLink, SocketLink  # noqa: E402
 
 SENSORS = ["hip_l", "hip_r", "knee_l", "knee_r", "contact_l", "contact_r", "slope", "pitch"]
 COMMANDS = ["v_hip_l", "v_hip_r", "v_knee_l", "v_knee_r"]
@@ -91,7 +91,7 @@ class OneProcess(_Side):
 
 
 class Framework(_Side):
-    """This process as the body: ``BusLink`` to an open-loop controller hosted by ``sfl_brain.host``,
+    """This process as the body: ``BusLink`` to an open-loop controller hosted by ``sfl_brain.runtime.host``,
     placed as ``lockstep.pin_cpus`` ``placement`` says, ticks on the lockstep ``link`` or the mesh."""
 
     def __init__(self, session, endpoint, run_id, folder, placement: str, link: str, spin: float) -> None:
@@ -126,7 +126,7 @@ class Framework(_Side):
 def startup(repeats: int = 5) -> dict[str, np.ndarray]:
     """``sfl run`` to all modules alive and to the first trial done, with the pair placed (``pin_cpus: auto``)
     and not (``never``), interleaved: (ready s, first trial s) per run."""
-    from sfl_brain.run import run
+    from sfl_brain.runtime.run import run
     from sfl_brain.scenario import load
 
     root = Path(__file__).resolve().parents[1]

@@ -35,7 +35,7 @@ import gymnasium as gym  # noqa: E402
 from _floor import machine_load  # noqa: E402
 
 import sfl_brain.gym  # noqa: E402, F401  (registers the ids)
-from sfl_brain.placement import usable_cpus  # noqa: E402
+from sfl_brain.runtime.placement import usable_cpus  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 BODIES = (

@@ -15,7 +15,7 @@ the rounds, ratios medians of the ratios within each round; the load average is 
     so that all meet the same neighbours on a busy machine;
 (b-numba) (b) with the network's RK4 and layers compiled (``CPGParams.kernel: numba``, the ``fast`` extra; issue 31),
     when numba is installed; its commands are within 1e-9 of numpy's per tick, so its walk is not bit for bit (b)'s;
-(c) the same trial with controller and body each hosted in its own process by ``sfl_brain.host``, as ``sfl run`` hosts
+(c) the same trial with controller and body each hosted in its own process by ``runtime.host``, as ``sfl run`` hosts
     them: placed as ``lockstep.pin_cpus`` ``--pin`` says (default ``auto``: both on one core, blocking), their frames
     and commands on their socket link (``lockstep.link: socket``); the trial is a request from this process,
     timed from request to reply;
@@ -48,13 +48,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import HostedPair, Pinned  # noqa: E402
 from _floor import machine_load  # noqa: E402
 
-from sfl_brain import bus  # noqa: E402
 from sfl_brain.bodies.humanoid import JOINT_NAMES, Humanoid  # noqa: E402
 from sfl_brain.bodies.humanoid_table import STANDING  # noqa: E402
 from sfl_brain.body import Controller, InProcessLink  # noqa: E402
-from sfl_brain.host import request  # noqa: E402
 from sfl_brain.messages import TrialRequest  # noqa: E402
 from sfl_brain.modules.controllers.cpg import CPGController, CPGParams  # noqa: E402
+from sfl_brain.runtime import bus  # noqa: E402
+from sfl_brain.runtime.host import request  # noqa: E402
 from sfl_brain.scenario import load  # noqa: E402
 
 #: the body's poll for each command in the humanoid's scenario (us), the benchmark's default
@@ -242,7 +242,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
 
 
 def pairs_where(mode: str) -> str:
-    from sfl_brain.placement import Pair, place, usable_cpus
+    from sfl_brain.runtime.placement import Pair, place, usable_cpus
 
     return place([Pair("body", "controller")], [], usable_cpus(), mode).reason
 

@@ -9,7 +9,7 @@ Two placements of the same run (the planar reflexive walker learning, ``scenario
          others, whatever else runs there: the placement ``auto`` made before issue 34;
 (yields) ``lockstep.pin_cpus: auto``: the pair on the least busy core, no module on a core other work keeps busy,
          nothing pinned when every core is; the supervisor looks again every 5 s and the placement yields when other
-         work comes to keep the pair's core busy (``sfl_brain.placement``).
+         work comes to keep the pair's core busy (``sfl_brain.runtime.placement``).
 
 on four machines:
 
@@ -43,7 +43,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _floor import machine_load  # noqa: E402
 
-from sfl_brain.placement import usable_cpus  # noqa: E402
+from sfl_brain.runtime.placement import usable_cpus  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "scenarios" / "quickstart.yaml"

@@ -11,7 +11,7 @@ median of the ratios within each round. The load average is printed.
     the core (c) places its pair on, so that both meet the same neighbours on a busy machine;
 (b0) the same with the body as it stepped before its hot path was batched (``_planar_before.py``),
     with the same metrics bit for bit (checked on every repeat);
-(c) controller and body each hosted in its own process by ``sfl_brain.host``, as ``sfl run`` hosts
+(c) controller and body each hosted in its own process by ``sfl_brain.runtime.host``, as ``sfl run`` hosts
     them: placed as ``lockstep.pin_cpus`` ``--pin`` says (default ``auto``: both on one core), their
     frames and commands on their socket link (``lockstep.link: socket``); the trial is a request
     from this process, timed from request to reply;
@@ -52,12 +52,12 @@ import _floor  # noqa: E402
 from _common import HostedPair, Pinned  # noqa: E402
 from _planar_before import PlanarBipedBefore  # noqa: E402
 
-from sfl_brain import bus  # noqa: E402
 from sfl_brain.bodies.planar_biped import PlanarBiped  # noqa: E402
 from sfl_brain.body import InProcessLink  # noqa: E402
-from sfl_brain.host import request  # noqa: E402
 from sfl_brain.messages import TrialRequest  # noqa: E402
 from sfl_brain.modules.controllers.reflex import ReflexController  # noqa: E402
+from sfl_brain.runtime import bus  # noqa: E402
+from sfl_brain.runtime.host import request  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 TICKS = 1000  # control ticks of a 10-s trial
@@ -136,7 +136,7 @@ class Processes(HostedPair):
 
 
 def sweep(workers: int, grid: int, colocate: bool, lockstep: list[str]) -> float:
-    from sfl_brain.run import run
+    from sfl_brain.runtime.run import run
     from sfl_brain.scenario import load
 
     plan = load(

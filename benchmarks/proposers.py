@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sfl_brain.records import read_records
-from sfl_brain.run import run
+from sfl_brain.recording.records import read_records
+from sfl_brain.runtime.run import run
 from sfl_brain.scenario import load
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -36,9 +36,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _floor import machine_load  # noqa: E402
 
-from sfl_brain.placement import usable_cpus  # noqa: E402
-from sfl_brain.study import core_slots  # noqa: E402
-from sfl_brain.study_dask import loopback_cluster  # noqa: E402
+from sfl_brain.runtime.placement import usable_cpus  # noqa: E402
+from sfl_brain.study.cluster import loopback_cluster  # noqa: E402
+from sfl_brain.study.study import core_slots  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "scenarios" / "e3_2_flat_s0.yaml"

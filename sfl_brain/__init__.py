@@ -10,3 +10,7 @@ try:
     __version__ = version("sfl-brain")
 except PackageNotFoundError:  # a checkout that was never installed
     __version__ = "0+unknown"
+
+from ._moved import install as _install_moved
+
+_install_moved()  # the flat paths of before issue 30 (``sfl_brain.records``, ...) still import

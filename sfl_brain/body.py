@@ -5,7 +5,7 @@ takes one control tick of commands, and says when the trial is over and how it
 went. A :class:`Controller` turns one tick of sensor values into one tick of
 commands. :meth:`Body.trial` runs them in lockstep through a *link*: the
 controller itself in the same process (:class:`InProcessLink`), or the same
-controller in another process (``sfl_brain.host.SocketLink`` or ``BusLink``). The loop
+controller in another process (``sfl_brain.runtime.ticklink.SocketLink`` or ``BusLink``). The loop
 is the same either way, so both give identical trial records.
 
 NaN or an infinity in a tick's sensor values, in a controller's command or in a
@@ -108,7 +108,7 @@ class Body(Module):
     COMMANDS: ClassVar[tuple[Signal, ...]] = ()
     #: parameters a trial request may set on the body (checked by ``sfl check``)
     TRIAL_PARAMS: ClassVar[tuple[str, ...]] = ()
-    #: the recording's default layout for a run of this body (``sfl_brain.rrlog.LAYOUTS``): "walker" (a planar
+    #: the recording's default layout for a run of this body (``sfl_brain.recording.rrlog.LAYOUTS``): "walker" (a planar
     #: walker's y-up pictures) or "humanoid" (3-D boxes, z up, with the terrain switch over the torso pitch)
     LAYOUT: ClassVar[str] = "walker"
     #: the unit of each metric :meth:`outcome` reports ("" for counts, flags and ratios): the ``m_<metric>`` columns

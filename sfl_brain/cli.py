@@ -9,7 +9,8 @@ from pathlib import Path
 import click
 
 from . import __version__
-from .scenario import ScenarioError, load
+from .scenario.errors import ScenarioError
+from .scenario.plan import load
 from .status import EXIT_BAD_INPUT, EXIT_CODES, EXIT_ENVIRONMENT, BadInput, EnvironmentProblem, RunStatus
 
 
@@ -23,7 +24,7 @@ def _load_or_exit(scenario: str, overrides: tuple[str, ...] = (), seed: int | No
 
 def exit_process(code: int) -> None:
     """End the command with ``code``: ``rrlog.exit_process`` (a recording a full disk has stuck is not waited for)."""
-    from .rrlog import exit_process as leave
+    from .recording.rrlog import exit_process as leave
 
     leave(code)
 
@@ -110,8 +111,8 @@ def run_command(
 ) -> None:
     """Run SCENARIO: one process per module, until the protocol completes (--resume RUN_DIR: go on with an
     interrupted learn run, replaying its recorded trials first)."""
-    from .progress import ProgressView
-    from .run import prepare_resume, run
+    from .runtime.progress import ProgressView
+    from .runtime.run import prepare_resume, run
 
     resumed = None
     if resume is not None:
@@ -132,7 +133,7 @@ def run_command(
     def ready(sup, seconds):
         view.ready(seconds)
         if listen:
-            from .worker import join_command
+            from .runtime.worker import join_command
 
             join = join_command(
                 scenario,
@@ -165,8 +166,8 @@ def run_command(
 
 def _study_options(command):
     """--k, --distinct and --window: what the study report measures (``sfl study`` and ``sfl report``)."""
-    from .metrics import DISTINCT, K_GOOD
-    from .study import WINDOW
+    from .recording.metrics import DISTINCT, K_GOOD
+    from .study.study import WINDOW
 
     command = click.option(
         "--window", type=int, default=WINDOW, show_default=True, help="trials in the success rate's moving window"
@@ -194,7 +195,7 @@ def _check_study_options(k: int, distinct: float, window: int) -> None:
 
 def _study_settings(k: int, distinct: float, window: int, said: dict | None = None):
     """The study report's settings (checked)."""
-    from .report_study import StudySettings
+    from .report.study import StudySettings
 
     _check_study_options(k, distinct, window)
     return StudySettings(k=k, distinct=distinct, window=window, said=said or {})
@@ -226,8 +227,9 @@ def study(scenario, vary, seeds, overrides, out, jobs, cluster, k, distinct, win
     report and left out of every mean. The exit code is the worst run's: 1 if any failed, else 3 if any stalled;
     130 when interrupted (run the same command to resume).
     """
-    from .report import write_report
-    from .study import (
+    from .report.report import write_report
+    from .study.cluster import DaskRunner, connect
+    from .study.study import (
         FINAL,
         LocalRunner,
         StudyInterrupted,
@@ -237,8 +239,7 @@ def study(scenario, vary, seeds, overrides, out, jobs, cluster, k, distinct, win
         triage,
         write_manifest,
     )
-    from .study_dask import DaskRunner, connect
-    from .study_view import StudyView
+    from .study.view import StudyView
 
     if jobs < 1:
         click.echo(f"sfl: --jobs {jobs}: expected 1 or more runs at once", err=True)
@@ -398,7 +399,7 @@ def _describe(cls, reference: str) -> list[str]:
 @click.option("--json", "as_json", is_flag=True, help="print the summary as one JSON object")
 def inspect(run_dir: Path, as_json: bool) -> None:
     """Summarise a finished or interrupted run."""
-    from .records import inspect_run
+    from .recording.records import inspect_run
 
     try:
         summary = inspect_run(run_dir)
@@ -435,7 +436,7 @@ def worker(scenario, connect, run_id, name, overrides, seed, secret_file, wait, 
     """Serve trials for a running run: a body worker with its controller in this process.
 
     Exits 0 when the run ends, 130 on Ctrl-C, 1 if no run answers within --wait seconds."""
-    from .worker import WorkerError, resolve_secret, run_worker
+    from .runtime.worker import WorkerError, resolve_secret, run_worker
 
     plan = _load_or_exit(scenario, overrides, seed)
     try:
@@ -463,9 +464,9 @@ def report(run_dirs, out, k, distinct, window) -> None:
 
     A study folder (made by sfl study) stands for its runs, and the page starts with the study's groups compared
     (learning curves, failures before K good gaits, a table of means with 95 % intervals)."""
-    from .records import run_status
-    from .report import write_report
-    from .report_study import is_study, study_runs
+    from .recording.records import run_status
+    from .report.report import write_report
+    from .report.study import is_study, study_runs
 
     folders, said, studies = [], {}, []
     for run_dir in run_dirs:

@@ -43,8 +43,8 @@ class ModuleStopped:
 @dataclass(frozen=True)
 class ModuleHung:
     """A module process had the CPU for ``seconds`` without progress while the run waited on it (``doing``), past its
-    time (``limit`` s, the scenario key ``key``): it is hung (:mod:`sfl_brain.liveness`). A body worker or controller
-    is killed and restarted by its policy; a brain module fails the run."""
+    time (``limit`` s, the scenario key ``key``): it is hung (:mod:`sfl_brain.runtime.liveness`). A body worker or
+    controller is killed and restarted by its policy; a brain module fails the run."""
 
     name: str
     seconds: float

@@ -22,7 +22,7 @@ step (under Gymnasium's default ``NEXT_STEP``, every other step would be a reset
 
 Episode k after ``reset(seed=s)`` is trial k of a run with seed s: the same trial seed (``protocols.trial_seed``,
 as ``Conductor.trial_request`` gives it) and the same module seeds (``scenario.instance_seed``), so a trial gives here
-what ``sfl run --seed s`` or ``sfl_brain.local`` gives for the same parameters. Before any seeded reset, s is the
+what ``sfl run --seed s`` or ``protocols.local`` gives for the same parameters. Before any seeded reset, s is the
 scenario's seed (or the constructor's ``seed``, as ``sfl run --seed``).
 
 Nothing else in sfl_brain imports this module, so the core does not need Gymnasium.
@@ -46,11 +46,11 @@ except ImportError as exc:  # the core does not need it; this door does
     raise ImportError("sfl_brain.gym needs Gymnasium: pip install 'sfl-brain[gym]' (gymnasium>=1.0)") from exc
 
 from .body import Body, _finite_vector
-from .local import build, build_body, controller_of
 from .messages import TrialRequest
-from .protocols import trial_seed
+from .protocols.conductor import trial_seed
+from .protocols.local import build, build_body, controller_of
 from .registry import nearest
-from .scenario import Instance, instance_seed, load
+from .scenario.plan import Instance, instance_seed, load
 from .signals import SENSOR_SLACK
 
 #: the ids :func:`register_envs` registers

@@ -3,7 +3,7 @@
 A module is plain Python: a frozen parameter schema (``Params``), ``reset(seed)``,
 and handler methods marked with :func:`on`, each taking one message type and
 returning the reply. Nothing here knows about Zenoh or processes; the runtime
-(:mod:`sfl_brain.host`) hosts a module in a process and routes messages to it.
+(:mod:`sfl_brain.runtime.host`) hosts a module in a process and routes messages to it.
 
 :meth:`Module.handle` refuses NaN and infinities in what a module receives and in the reply it
 gives (:class:`~sfl_brain.messages.NonFiniteError`, naming the module, the message and the field),

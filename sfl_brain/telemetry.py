@@ -3,8 +3,8 @@
 Bodies, controllers and brain modules import no viewer library. On a logged trial they hand
 typed items (scalar series, 2-D line strips, arrows, boxes, events, map snapshots) to
 ``self.telemetry``, a :class:`TelemetrySink`; the runtime gives each hosted module a sink that turns
-the items into Rerun columns (:mod:`sfl_brain.rerun_sink`) and, for map snapshots, rows of
-``maps.parquet`` (:mod:`sfl_brain.tables`); a test gives it a :class:`CaptureTelemetry` and reads
+the items into Rerun columns (:mod:`sfl_brain.recording.rerun_sink`) and, for map snapshots, rows of
+``maps.parquet`` (:mod:`sfl_brain.recording.tables`); a test gives it a :class:`CaptureTelemetry` and reads
 the items back. Without a sink (``None``: the run does not record) nothing is computed.
 
 A sink also says how much it wants to see (:class:`Rates`, from the scenario's ``record:``

@@ -18,7 +18,7 @@ SCENARIOS = ROOT / "scenarios"
 def pytest_xdist_auto_num_workers(config) -> int:
     """``-n auto``: a worker per core this process may use (``taskset`` and container limits respected), not per
     core the machine has."""
-    from sfl_brain.placement import usable_cpus
+    from sfl_brain.runtime.placement import usable_cpus
 
     return len(usable_cpus()) or os.cpu_count() or 1
 
@@ -34,8 +34,8 @@ def pytest_sessionstart(session) -> None:
 
 
 def what_computes() -> list[str]:
-    """The versions of what computes and checks, and the numeric platform (``sfl_brain.provenance``)."""
-    from sfl_brain.provenance import DISTRIBUTIONS, describe_platform, numeric_platform, versions
+    """The versions of what computes and checks, and the numeric platform (``sfl_brain.recording.provenance``)."""
+    from sfl_brain.recording.provenance import DISTRIBUTIONS, describe_platform, numeric_platform, versions
 
     found = versions((*DISTRIBUTIONS, "gymnasium", "cma", "optuna", "scikit-learn", "distributed", "pytest-xdist"))
     return [
@@ -56,7 +56,7 @@ def pytest_configure(config) -> None:
     count = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
     if not worker.startswith("gw") or count < 2 or not hasattr(os, "sched_setaffinity"):
         return
-    from sfl_brain.placement import pin, usable_cpus
+    from sfl_brain.runtime.placement import pin, usable_cpus
 
     cores = usable_cpus()
     os.environ.setdefault(ALL_CORES, ",".join(map(str, cores)))
@@ -70,7 +70,7 @@ ALL_CORES = "SFL_TEST_ALL_CORES"
 
 def all_cores() -> list[int]:
     """The cores the whole test session may use (a worker's own share is ``usable_cpus()``)."""
-    from sfl_brain.placement import usable_cpus
+    from sfl_brain.runtime.placement import usable_cpus
 
     saved = os.environ.get(ALL_CORES)
     return [int(c) for c in saved.split(",")] if saved else usable_cpus()
@@ -190,7 +190,7 @@ def listening_run(scenario, out, *sets: str, modules: int, extra: tuple[str, ...
     """
     import types
 
-    from sfl_brain import bus
+    from sfl_brain.runtime import bus
 
     endpoint = bus.free_endpoint()
     settings = [arg for s in sets for arg in ("--set", s)]
@@ -243,7 +243,7 @@ class TickStranger:
     The body's end of a socket link only connects: nothing put to the body's keys reaches it."""
 
     def __init__(self, run_dir: Path) -> None:
-        from sfl_brain import bus, ticklink
+        from sfl_brain.runtime import bus, ticklink
 
         links = json.loads((Path(run_dir) / "logs" / "placement.json").read_text())["lockstep_links"]
         self.endpoint = links["controller"]["listen"][0]
@@ -255,7 +255,7 @@ class TickStranger:
     def put(self, key: str, payload: bytes) -> None:
         import socket
 
-        from sfl_brain import ticklink
+        from sfl_brain.runtime import ticklink
 
         if self.session is not None:
             self.session.put(key, payload)

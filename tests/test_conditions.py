@@ -13,7 +13,7 @@ from rerun.chunk import RrdReader
 
 from sfl_brain import scenario as sc
 from sfl_brain.protocols import condition_cases, repeat_seed
-from sfl_brain.report_conditions import Trials, fisher_exact, mcnemar_exact, pattern_space_paths, value_at, wilson
+from sfl_brain.report.conditions import Trials, fisher_exact, mcnemar_exact, pattern_space_paths, value_at, wilson
 from sfl_brain.scenario import PatternSpaceAnalysis
 
 from .conftest import SCENARIOS, sfl, sfl_run
@@ -36,7 +36,7 @@ modules:
 
 
 def test_cases_run_every_condition_point_and_repeat_and_pair_starts_by_repeat():
-    plan = sc.build_plan(sc.yaml.safe_load(BASE.replace("repeats: 2", "repeats: 3")), "cond.yaml", SCENARIOS)
+    plan = sc.build_plan(yaml.safe_load(BASE.replace("repeats: 2", "repeats: 3")), "cond.yaml", SCENARIOS)
     proto = plan.scenario.protocol
     cases = condition_cases(proto)
     assert proto.trials == len(cases) == 2 * 2 * 3
@@ -201,7 +201,7 @@ modules:
         brace: {trigger: time, at: 5.0, joints: {hip_l: plateau, hip_r: plateau}}
   body: {impl: planar_8link}
 """
-    plan = sc.build_plan(sc.yaml.safe_load(text), "push.yaml", SCENARIOS)
+    plan = sc.build_plan(yaml.safe_load(text), "push.yaml", SCENARIOS)
     assert plan.scenario.protocol.follow == {"controller.switch_at": "body.push_time"}
     bad = text.replace(
         "follow: {controller.switch_at: body.push_time}", "follow: {controller.switch_at: body.push_tim}"

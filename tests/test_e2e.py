@@ -12,10 +12,10 @@ import psutil
 import pytest
 from rerun.chunk import RrdReader
 
-from sfl_brain import bus
-from sfl_brain.local import run_local
-from sfl_brain.provenance import describe_platform
-from sfl_brain.records import read_records
+from sfl_brain.protocols.local import run_local
+from sfl_brain.recording.provenance import describe_platform
+from sfl_brain.recording.records import read_records
+from sfl_brain.runtime import bus
 from sfl_brain.scenario import load
 
 from .conftest import ROOT, SCENARIOS, Lines, joined_run, sfl, sfl_run, start_sfl_run, wait_for_trials
@@ -74,7 +74,7 @@ def test_learn_run_records_everything_and_matches_in_process(tmp_path):
         "final_vigilance",
         "best_quality",
         "wall_time_s",
-        "proposer",  # a learn run: which proposer chose, and its safe-learning metrics (sfl_brain.metrics)
+        "proposer",  # a learn run: which proposer chose, and its safe-learning metrics (sfl_brain.recording.metrics)
         "failures_before_first_success",
         "failures_before_10_gaits",
         "distinct_gaits",
@@ -268,8 +268,8 @@ def test_buslink_times_out_when_no_controller_answers():
     """A body blocked in recv() on a silent controller is woken by the watchdog: the trial is interrupted."""
     import numpy as np
 
-    from sfl_brain.host import BusLink, LinkError
     from sfl_brain.messages import SensorFrame
+    from sfl_brain.runtime.ticklink import BusLink, LinkError
 
     session = bus.open_session([bus.free_endpoint()], [])
     link = BusLink(session, "lonely", "body", "controller", timeout=0.3)
@@ -283,8 +283,8 @@ def test_buslink_times_out_when_no_controller_answers():
 
 def test_a_request_nobody_answers_says_the_query_ended_not_that_it_waited_out_its_time():
     """A module gone (killed between two requests) ends the query at once: the error must not read as a time-out."""
-    from sfl_brain.host import NoReply, request
     from sfl_brain.messages import Rejected
+    from sfl_brain.runtime.host import NoReply, request
 
     session = bus.open_session([bus.free_endpoint()], [])
     try:
@@ -328,7 +328,7 @@ def test_sessions_run_zenoh_on_one_runtime_thread_unless_the_user_says_otherwise
 
 
 def test_the_body_polls_for_commands_only_while_polling_makes_ticks_shorter():
-    from sfl_brain.host import SpinThenSleep
+    from sfl_brain.runtime.ticklink import SpinThenSleep
 
     def run(spin_tick, sleep_tick, ticks=1024):
         now = 0.0

@@ -8,8 +8,8 @@ import subprocess
 import psutil
 import pytest
 
-from sfl_brain.local import run_local
-from sfl_brain.records import read_records
+from sfl_brain.protocols.local import run_local
+from sfl_brain.recording.records import read_records
 from sfl_brain.scenario import load
 
 from .conftest import SCENARIOS, start_sfl_run, wait_for_trials
@@ -23,7 +23,7 @@ def stable(rows):
 
 
 def module_process(proc: subprocess.Popen, name: str) -> psutil.Process:
-    """The child hosting ``name`` (``python -m sfl_brain.host --name NAME``; the spec is on its stdin).
+    """The child hosting ``name`` (``python -m sfl_brain.runtime.host --name NAME``; the spec is on its stdin).
 
     Asked once trials are recorded: the protocol starts only when every module is alive."""
     for child in psutil.Process(proc.pid).children(recursive=True):

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from sfl_brain import messages as m
-from sfl_brain.local import run_local
-from sfl_brain.metrics import safe_learning
 from sfl_brain.proposers import PROPOSERS, VETOED, Outcome, Proposer
 from sfl_brain.protocols import trial_progress
+from sfl_brain.protocols.local import run_local
+from sfl_brain.recording.metrics import safe_learning
 from sfl_brain.scenario import ScenarioError, load
 
 from .conftest import ROOT, SCENARIOS, sfl

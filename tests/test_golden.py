@@ -2,7 +2,7 @@
 
 The golden records (``tests/golden/<snapshot>/``) were first written by the code before issue 14's changes (commit
 403dc6e), with every module in one process, on a CPU with AVX-512. On another CPU numpy takes other SIMD kernels
-(``sfl_brain.provenance``), so the same code gives the same outcomes and decisions but floats that differ in their
+(``recording.provenance``), so the same code gives the same outcomes and decisions but floats that differ in their
 last bits, and a 10-s walk amplifies those bits. Two promises, two tests:
 
 - **on the platform that wrote a snapshot, bit for bit** (the refactor guard): every row, field for field, float for

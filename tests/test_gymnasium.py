@@ -1,6 +1,6 @@
 """The Gymnasium door (sfl_brain/gym.py, docs/gymnasium.md): both environments pass Gymnasium's own ``check_env`` on
 the real planar reflex walker (pymunk) and the trial environment on the humanoid (PyBullet); the same seed gives the
-same observations; an episode is the trial ``sfl_brain.local`` runs for the same point and seed; bad input is refused
+same observations; an episode is the trial ``protocols.local`` runs for the same point and seed; bad input is refused
 naming what is wrong; the page's Python runs and prints what the page shows."""
 
 from __future__ import annotations
@@ -20,9 +20,9 @@ from gymnasium.utils.env_checker import check_env
 
 import sfl_brain.gym as sfl_gym
 from sfl_brain.events import Events
-from sfl_brain.local import LocalModules
 from sfl_brain.messages import NonFiniteError
 from sfl_brain.protocols import Conductor
+from sfl_brain.protocols.local import LocalModules
 from sfl_brain.scenario import ScenarioError, load
 from sfl_brain.signals import SENSOR_SLACK
 
@@ -383,7 +383,7 @@ def test_the_core_imports_no_gymnasium_and_the_door_says_how_to_get_it():
         return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
 
     core = python(
-        "import json, sys, sfl_brain, sfl_brain.local, sfl_brain.scenario, sfl_brain.protocols, sfl_brain.body\n"
+        "import json, sys, sfl_brain, sfl_brain.protocols.local, sfl_brain.scenario, sfl_brain.body\n"
         "print(json.dumps(sorted(m for m in sys.modules if m.startswith('gymnasium'))))"
     )
     assert core.returncode == 0, core.stderr

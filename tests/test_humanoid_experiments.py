@@ -1,4 +1,4 @@
-"""The humanoid's chapter-4 experiments as scenarios (issue 23): E4.5's return map (sfl_brain/poincare.py, on the
+"""The humanoid's chapter-4 experiments as scenarios (issue 23): E4.5's return map (sfl_brain/report/poincare.py, on the
 walks of scenarios/e4_5_poincare.yaml), the long-walk ground of its body, and E4.7's switch (scenarios/e4_7_push.yaml)
 fired by the body's touch sensor. Results: docs/results/chapter4/."""
 
@@ -9,12 +9,12 @@ import math
 import numpy as np
 import pytest
 
-from sfl_brain import poincare
 from sfl_brain.bodies.humanoid import JOINT_NAMES, Humanoid
 from sfl_brain.body import InProcessLink
 from sfl_brain.messages import TrialRequest
 from sfl_brain.modules.controllers.cpg import CPGController
 from sfl_brain.modules.cpg.patterns import PATTERN_POINTS
+from sfl_brain.report import poincare
 from sfl_brain.scenario import load
 
 from .conftest import SCENARIOS

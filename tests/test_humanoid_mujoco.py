@@ -20,10 +20,10 @@ from sfl_brain.bodies.humanoid_mujoco import HumanoidMujoco, import_mujoco  # no
 from sfl_brain.bodies.humanoid_table import JOINTS, LEG_LENGTH, LINKS, PARTS, TOTAL_MASS  # noqa: E402
 from sfl_brain.body import InProcessLink  # noqa: E402
 from sfl_brain.conformance import check_module  # noqa: E402
-from sfl_brain.local import run_local  # noqa: E402
 from sfl_brain.messages import TrialRequest  # noqa: E402
 from sfl_brain.modules.controllers.cpg import CPGController, CPGParams  # noqa: E402
-from sfl_brain.records import read_records  # noqa: E402
+from sfl_brain.protocols.local import run_local  # noqa: E402
+from sfl_brain.recording.records import read_records  # noqa: E402
 from sfl_brain.scenario import load  # noqa: E402
 
 from .conftest import ROOT, SCENARIOS, sfl_run  # noqa: E402

@@ -16,7 +16,7 @@ from sfl_brain.bodies.humanoid_table import PARTS, STANDING, TOTAL_MASS
 from sfl_brain.body import InProcessLink
 from sfl_brain.messages import TrialRequest
 from sfl_brain.modules.controllers.cpg import CPGController, CPGParams
-from sfl_brain.records import read_records
+from sfl_brain.recording.records import read_records
 
 from .conftest import SCENARIOS, sfl_run
 

@@ -1,6 +1,6 @@
 """The run's parts and what each may depend on (issue 14, part 4).
 
-Protocols talk to an abstract module service (:mod:`sfl_brain.service`), so they run with every
+Protocols talk to an abstract module service (:mod:`sfl_brain.protocols.service`), so they run with every
 module in one process without Zenoh, and over Zenoh unchanged. The supervisor decides restarts and
 retries from typed events, and publishes what happens as typed events.
 """
@@ -24,21 +24,21 @@ from sfl_brain.events import (
     TrialInterrupted,
     TrialRecorded,
 )
-from sfl_brain.local import LocalModules, run_local
 from sfl_brain.protocols import PROTOCOLS, Conductor
+from sfl_brain.protocols.local import LocalModules, run_local
+from sfl_brain.protocols.service import Interrupted, RunError
 from sfl_brain.scenario import load
-from sfl_brain.service import Interrupted, RunError
 
 from .conftest import ROOT, SCENARIOS
 
 LEARN = SCENARIOS / "analytic_learn.yaml"
 ZENOH_SIDE = (
     "zenoh",
-    "sfl_brain.runtime",
-    "sfl_brain.bus",
-    "sfl_brain.host",
-    "sfl_brain.processes",
-    "sfl_brain.ticklink",
+    "sfl_brain.runtime.supervisor",
+    "sfl_brain.runtime.bus",
+    "sfl_brain.runtime.host",
+    "sfl_brain.runtime.processes",
+    "sfl_brain.runtime.ticklink",
 )
 
 
@@ -52,7 +52,9 @@ def python(code: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=300)
 
 
-@pytest.mark.parametrize("module", ["sfl_brain.protocols", "sfl_brain.local", "sfl_brain.service", "sfl_brain.events"])
+@pytest.mark.parametrize(
+    "module", ["sfl_brain.protocols", "sfl_brain.protocols.local", "sfl_brain.protocols.service", "sfl_brain.events"]
+)
 def test_the_protocol_side_imports_nothing_of_zenoh_or_the_supervisor(module):
     done = python(f"import json, sys, {module}; print(json.dumps(sorted(sys.modules)))")
     assert done.returncode == 0, done.stderr
@@ -66,7 +68,7 @@ def test_a_learning_run_in_one_process_works_without_zenoh():
     gives the records it gives here."""
     code = (
         "import sys, json; sys.modules['zenoh'] = None\n"
-        "from sfl_brain.local import run_local\n"
+        "from sfl_brain.protocols.local import run_local\n"
         "from sfl_brain.scenario import load\n"
         f"rows = run_local(load({str(LEARN)!r}, ['protocol.trials=8']))\n"
         "print(json.dumps(rows))\n"
@@ -144,8 +146,8 @@ def test_events_go_to_the_handlers_of_their_exact_type_in_order():
 def supervisor(tmp_path, *sets):
     """A supervisor of the walker (acc, vigilance, ofc, body, controller) whose children are made
     up: nothing is spawned, a respawn is only counted."""
-    from sfl_brain.processes import Child
-    from sfl_brain.runtime import Supervisor
+    from sfl_brain.runtime.processes import Child
+    from sfl_brain.runtime.supervisor import Supervisor
 
     plan = load(SCENARIOS / "quickstart.yaml", list(sets))
     sup = Supervisor(plan, tmp_path, "test")
@@ -160,8 +162,8 @@ def supervisor(tmp_path, *sets):
 
 
 def test_a_dead_controller_interrupts_its_bodys_trial_and_is_restarted_by_policy(tmp_path):
-    from sfl_brain.processes import Exited
-    from sfl_brain.runtime import Pending
+    from sfl_brain.runtime.processes import Exited
+    from sfl_brain.runtime.supervisor import Pending
 
     sup, published = supervisor(tmp_path, "modules.controller.restart=on-failure")
     sup.pending[7] = Pending("body", m.Rejected(consecutive=0))
@@ -178,7 +180,7 @@ def test_a_dead_controller_interrupts_its_bodys_trial_and_is_restarted_by_policy
 
 
 def test_a_dead_brain_module_ends_the_run_naming_it(tmp_path):
-    from sfl_brain.processes import Exited
+    from sfl_brain.runtime.processes import Exited
 
     sup, published = supervisor(tmp_path, "modules.body.restart=on-failure")
     with pytest.raises(RunError, match=r"module `acc` \(.*\) died with exit code -9; its log"):
@@ -189,8 +191,8 @@ def test_a_dead_brain_module_ends_the_run_naming_it(tmp_path):
 
 
 def test_retry_is_decided_by_the_remote_fault_type():
-    from sfl_brain.host import LinkError
-    from sfl_brain.runtime import remote_fault
+    from sfl_brain.runtime.supervisor import remote_fault
+    from sfl_brain.runtime.ticklink import LinkError
 
     cut = remote_fault("body", "body.trial", f"{LinkError.__name__}: interrupted: no command for tick 5 within 1 s")
     assert type(cut) is Interrupted
@@ -207,7 +209,7 @@ def test_a_signal_that_lands_in_a_callback_is_raised_where_the_run_waits(tmp_pat
     import threading
     import time
 
-    from sfl_brain.runtime import Pending
+    from sfl_brain.runtime.supervisor import Pending
 
     sup, _ = supervisor(tmp_path)
     sup.pending[7] = Pending("body", m.Rejected(consecutive=0))  # never answered
@@ -299,7 +301,96 @@ def test_no_module_imports_itself_back_through_others():
     """No circle of imports (issue 22: ``events`` <-> ``protocols`` <-> ``records`` and ``host`` <-> ``rrlog`` were
     broken): each layer can be read, and tested, after the ones it uses."""
     graph = import_graph()
-    assert {"sfl_brain.protocols", "sfl_brain.events", "sfl_brain.proposers.sfl"} <= set(graph)
-    assert "sfl_brain.events" in graph["sfl_brain.protocols"]  # the graph sees our imports
+    assert {"sfl_brain.protocols.conductor", "sfl_brain.events", "sfl_brain.proposers.sfl"} <= set(graph)
+    assert "sfl_brain.events" in graph["sfl_brain.protocols.conductor"]  # the graph sees our imports
     assert circles(graph) == []
     assert circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+# ---------------------------------------------------------------- the packages' order (issue 30)
+#: ``sfl_brain``'s layers, lowest first: a module may import its own layer and those before it, never one after.
+#: The contract a plugin writer imports is the top-level modules; the two doors (the ``sfl`` command and the
+#: Gymnasium environments) are top-level too, but stand on everything. ``docs/architecture.md`` tells the same order.
+LAYERS = (
+    (
+        "contract",
+        (
+            "sfl_brain",
+            "sfl_brain._moved",
+            "sfl_brain.messages",
+            "sfl_brain.module",
+            "sfl_brain.telemetry",
+            "sfl_brain.registry",
+            "sfl_brain.signals",
+            "sfl_brain.body",
+            "sfl_brain.conformance",
+            "sfl_brain.status",
+            "sfl_brain.events",
+        ),
+    ),
+    ("proposers", ("sfl_brain.proposers",)),
+    ("scenario", ("sfl_brain.scenario",)),
+    ("recording", ("sfl_brain.recording",)),
+    ("protocols", ("sfl_brain.protocols",)),
+    ("runtime", ("sfl_brain.runtime",)),
+    ("study", ("sfl_brain.study",)),
+    ("report", ("sfl_brain.report",)),
+    ("doors", ("sfl_brain.cli", "sfl_brain.gym")),
+)
+
+
+def layer_of(module: str) -> int:
+    """The index in :data:`LAYERS` of ``module``: the layer naming it or the package holding it."""
+    for index, (_, members) in enumerate(LAYERS):
+        if module in members or any(module.startswith(f"{m}.") for m in members if m != "sfl_brain"):
+            return index
+    raise LookupError(f"{module} is in no layer of LAYERS: place it")
+
+
+def upward_imports(graph: dict[str, set[str]]) -> list[str]:
+    """Every import of a later layer, as ``importer (layer) imports imported (layer)``."""
+    name = [n for n, _ in LAYERS]
+    return sorted(
+        f"{a} ({name[layer_of(a)]}) imports {b} ({name[layer_of(b)]})"
+        for a, deps in graph.items()
+        for b in deps
+        if layer_of(b) > layer_of(a)
+    )
+
+
+def test_every_module_is_in_a_layer_and_imports_only_its_own_layer_and_those_below():
+    """contract <- proposers <- scenario <- recording <- protocols <- runtime <- study <- report <- doors."""
+    graph = import_graph()
+    assert {layer_of(module) for module in graph} == set(range(len(LAYERS)))  # every layer is found, none empty
+    assert upward_imports(graph) == []
+
+
+def test_the_layer_check_fails_on_an_import_against_the_order():
+    graph = import_graph()
+    inverted = {**graph, "sfl_brain.scenario.plan": graph["sfl_brain.scenario.plan"] | {"sfl_brain.runtime.run"}}
+    assert upward_imports(inverted) == ["sfl_brain.scenario.plan (scenario) imports sfl_brain.runtime.run (runtime)"]
+    contract = {**graph, "sfl_brain.body": graph["sfl_brain.body"] | {"sfl_brain.recording.rrlog"}}
+    assert upward_imports(contract) == ["sfl_brain.body (contract) imports sfl_brain.recording.rrlog (recording)"]
+    with pytest.raises(LookupError, match="sfl_brain.plugins.x is in no layer"):
+        layer_of("sfl_brain.plugins.x")
+
+
+def test_the_paths_of_before_the_packages_import_the_same_modules():
+    """``sfl_brain.records`` and the other flat paths of before issue 30 still import, as the very module at the new
+    path; the old modules that became packages hand out their names."""
+    import importlib
+
+    from sfl_brain._moved import MOVED
+
+    for old, new in MOVED.items():
+        assert importlib.import_module(old) is importlib.import_module(new), old
+    from sfl_brain.report import write_report
+    from sfl_brain.report.report import write_report as new_write_report
+    from sfl_brain.runtime import Supervisor as OldSupervisor
+    from sfl_brain.runtime.supervisor import Supervisor
+    from sfl_brain.study import plan_study
+    from sfl_brain.study.study import plan_study as new_plan_study
+
+    assert (OldSupervisor, write_report, plan_study) == (Supervisor, new_write_report, new_plan_study)
+    with pytest.raises(AttributeError, match="module 'sfl_brain.runtime' has no attribute 'nothing'"):
+        _ = importlib.import_module("sfl_brain.runtime").nothing

@@ -1,5 +1,5 @@
 """A busy machine never kills a healthy run (issue 34): module processes are judged by their progress and the CPU
-they could have used (``sfl_brain.liveness``), not by the wall clock or a lease; a hung one is still found.
+they could have used (``sfl_brain.runtime.liveness``), not by the wall clock or a lease; a hung one is still found.
 
 The runs here start real processes under real faults: a controller stopped mid-trial (SIGSTOP, SIGCONT) for longer
 than its tick time-out and the lease that used to kill it; a run at ``nice -n 10`` beside more busy processes than
@@ -17,10 +17,10 @@ import sys
 
 import pytest
 
-from sfl_brain.liveness import CpuSample, NoProgressClock, cpu_sample, had_the_cpu
-from sfl_brain.local import run_local
-from sfl_brain.placement import usable_cpus
-from sfl_brain.records import read_records
+from sfl_brain.protocols.local import run_local
+from sfl_brain.recording.records import read_records
+from sfl_brain.runtime.liveness import CpuSample, NoProgressClock, cpu_sample, had_the_cpu
+from sfl_brain.runtime.placement import usable_cpus
 from sfl_brain.scenario import load
 
 from .conftest import SCENARIOS, Lines, poll_until, start_sfl_run, wait_for_trials

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from sfl_brain.metrics import safe_learning
+from sfl_brain.recording.metrics import safe_learning
 
 
 def row(i, ok, eta, v, decision=None):

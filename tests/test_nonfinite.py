@@ -157,7 +157,7 @@ def test_handle_refuses_a_non_finite_message_it_receives():
 
 
 def test_run_local_stops_at_the_first_non_finite_reply(tmp_path):
-    from sfl_brain.local import run_local
+    from sfl_brain.protocols.local import run_local
     from sfl_brain.scenario import load
 
     scenario = tmp_path / "scenario.yaml"
@@ -399,7 +399,7 @@ record: {{body_every: 0}}
 def failed_run(tmp_path, scenario_text: str) -> tuple[dict, list[dict], float]:
     """Run ``scenario_text`` (next to NAN_MODULES) with ``sfl run``; the summary, the trial rows and
     the wall time. The run must end failed with exit code 1."""
-    from sfl_brain.records import read_records
+    from sfl_brain.recording.records import read_records
 
     (tmp_path / "nan_modules.py").write_text(NAN_MODULES)
     scenario = tmp_path / "scenario.yaml"

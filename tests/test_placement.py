@@ -1,13 +1,13 @@
 """Where a run's processes run: each body worker and its controller process share a core of their own,
-brain modules the other cores (``sfl_brain.placement.place``, a pure function of the pairs, the usable
+brain modules the other cores (``sfl_brain.runtime.placement.place``, a pure function of the pairs, the usable
 cores and ``lockstep.pin_cpus``)."""
 
 from __future__ import annotations
 
 import pytest
 
-from sfl_brain.placement import Pair, Placement, cpu_list, place
-from sfl_brain.runtime import lockstep_pairs
+from sfl_brain.runtime.placement import Pair, Placement, cpu_list, place
+from sfl_brain.runtime.supervisor import lockstep_pairs
 from sfl_brain.scenario import load
 
 from .conftest import SCENARIOS

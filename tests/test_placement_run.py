@@ -7,9 +7,9 @@ import os
 
 import pytest
 
-from sfl_brain.local import run_local
-from sfl_brain.placement import Pair, place, usable_cpus
-from sfl_brain.records import read_records
+from sfl_brain.protocols.local import run_local
+from sfl_brain.recording.records import read_records
+from sfl_brain.runtime.placement import Pair, place, usable_cpus
 from sfl_brain.scenario import load
 
 from .conftest import SCENARIOS, all_cores, on_all_cores, sfl_run
@@ -29,8 +29,8 @@ def logs(out) -> dict[str, str]:
 
 def answer_reset(query) -> None:
     """A controller's reset answered as its host answers it (a run without a secret)."""
-    from sfl_brain import bus
     from sfl_brain.messages import Ack, ControllerReset, decode, encode
+    from sfl_brain.runtime import bus
 
     seal = bus.Seal(None)
     nonce, body = seal.open_request(str(query.key_expr), query.payload.to_bytes())
@@ -96,9 +96,9 @@ def test_a_pairs_core_that_other_work_comes_to_keep_busy_makes_the_placement_yie
     import psutil
 
     from sfl_brain.events import PlacementYielded
-    from sfl_brain.placement import Placement
-    from sfl_brain.processes import Child
-    from sfl_brain.runtime import Supervisor
+    from sfl_brain.runtime.placement import Placement
+    from sfl_brain.runtime.processes import Child
+    from sfl_brain.runtime.supervisor import Supervisor
 
     from .conftest import poll_until
 
@@ -150,9 +150,9 @@ def test_on_its_link_the_body_takes_only_its_trials_command_and_counts_the_rest(
     import numpy as np
     import zenoh
 
-    from sfl_brain import bus
-    from sfl_brain.host import BusLink
     from sfl_brain.messages import ControllerReset, MotorCommand, SensorFrame, decode, encode
+    from sfl_brain.runtime import bus
+    from sfl_brain.runtime.ticklink import BusLink
 
     endpoint = bus.tick_endpoint(tmp_path, "0")
     mesh = bus.open_session([bus.free_endpoint()], [])
@@ -200,9 +200,9 @@ def test_on_its_socket_link_the_body_takes_only_its_trials_command_and_a_dead_co
 
     import numpy as np
 
-    from sfl_brain import bus, ticklink
-    from sfl_brain.host import LinkError, SocketLink
     from sfl_brain.messages import ControllerReset, MotorCommand, SensorFrame, decode, encode
+    from sfl_brain.runtime import bus, ticklink
+    from sfl_brain.runtime.ticklink import LinkError, SocketLink
 
     endpoint = ticklink.endpoint(tmp_path, "0")
     mesh = bus.open_session([bus.free_endpoint()], [])
@@ -260,7 +260,7 @@ def test_idle_connections_of_another_process_cannot_lock_the_body_out_of_its_con
     connects anew after each restart, still gets its commands; the slots it took are counted."""
     import socket
 
-    from sfl_brain import ticklink
+    from sfl_brain.runtime import ticklink
 
     endpoint = ticklink.endpoint(tmp_path, "0")
     refused = []

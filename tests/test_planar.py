@@ -6,11 +6,11 @@ import numpy as np
 
 from sfl_brain.bodies.planar_biped import PlanarBiped
 from sfl_brain.body import InProcessLink
-from sfl_brain.local import run_local
 from sfl_brain.messages import TrialRequest
 from sfl_brain.modules.controllers.reflex import ReflexController, sensor_neuron
-from sfl_brain.placement import usable_cpus
-from sfl_brain.records import read_records
+from sfl_brain.protocols.local import run_local
+from sfl_brain.recording.records import read_records
+from sfl_brain.runtime.placement import usable_cpus
 from sfl_brain.scenario import load
 
 from .conftest import SCENARIOS, sfl_run
@@ -198,8 +198,8 @@ def test_garbage_on_the_tick_keys_is_dropped_and_changes_nothing(tmp_path):
 
     import msgspec
 
-    from sfl_brain import bus
     from sfl_brain.messages import SCHEMA_VERSION, SensorFrame, encode
+    from sfl_brain.runtime import bus
 
     from .conftest import TickStranger, joined_run
 

@@ -1,13 +1,13 @@
-"""E4.5 as a scenario: the Poincaré analysis (sfl_brain/poincare.py) on a known map, and on a real run read back from
-its recording by sfl report (sfl_brain/recorded.py)."""
+"""E4.5 as a scenario: the Poincaré analysis (sfl_brain/report/poincare.py) on a known map, and on a real run read
+back from its recording by sfl report (sfl_brain/recording/recorded.py)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from sfl_brain.poincare import analyse, fit_return_map, section_returns
-from sfl_brain.recorded import read_series
+from sfl_brain.recording.recorded import read_series
+from sfl_brain.report.poincare import analyse, fit_return_map, section_returns
 
 from .conftest import SCENARIOS, sfl, sfl_run
 

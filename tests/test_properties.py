@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from sfl_brain.local import run_local
+from sfl_brain.protocols.local import run_local
 from sfl_brain.scenario import load
 
 from .conftest import SCENARIOS

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from sfl_brain import messages as m
-from sfl_brain.local import run_local
 from sfl_brain.proposers import PROPOSERS, Outcome, Proposer
-from sfl_brain.records import read_records
+from sfl_brain.protocols.local import run_local
+from sfl_brain.recording.records import read_records
 from sfl_brain.scenario import ScenarioError, load
 
 from .conftest import SCENARIOS, sfl

@@ -25,7 +25,7 @@ from sfl_brain.body import InProcessLink
 from sfl_brain.messages import Finish, Learn, TrialRequest
 from sfl_brain.modules.acc import ACC
 from sfl_brain.modules.controllers.reflex import ReflexController
-from sfl_brain.rrlog import RerunLog, blueprint
+from sfl_brain.recording.rrlog import RerunLog, blueprint
 from sfl_brain.telemetry import FAILURE, SUCCESS, CaptureTelemetry, Event, MapSnapshots, Rates, Scalars, Strips2D
 
 from .conftest import SCENARIOS, sfl_run

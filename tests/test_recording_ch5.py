@@ -17,8 +17,8 @@ import yaml
 from rerun.chunk import RrdReader
 
 from sfl_brain.modules.controllers.cpg import CPGParams
-from sfl_brain.recorded import read_events, read_series
-from sfl_brain.rrlog import blueprint, layout_of
+from sfl_brain.recording.recorded import read_events, read_series
+from sfl_brain.recording.rrlog import blueprint, layout_of
 from sfl_brain.scenario import load
 
 from .conftest import SCENARIOS, sfl_run

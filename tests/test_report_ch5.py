@@ -1,9 +1,9 @@
-"""Chapter 5's report: the success region of E5.3 (sfl_brain/report_ch5.py)."""
+"""Chapter 5's report: the success region of E5.3 (sfl_brain/report/ch5.py)."""
 
 import numpy as np
 import pytest
 
-from sfl_brain.report_ch5 import success_region
+from sfl_brain.report.ch5 import success_region
 
 
 def maps(success_at, failure_at, success_wins=1, failure_wins=1, spread=0.0):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from sfl_brain.modules.cpg.patterns import PATTERN_POINTS
-from sfl_brain.report_cpg import Neuron, energy_order, joint_patterns
+from sfl_brain.report.cpg import Neuron, energy_order, joint_patterns
 
 from .conftest import SCENARIOS, sfl, sfl_run
 

@@ -10,7 +10,7 @@ import subprocess
 import tempfile
 from pathlib import Path
 
-from sfl_brain.local import run_local
+from sfl_brain.protocols.local import run_local
 from sfl_brain.scenario import load
 
 from .conftest import SCENARIOS, poll_until, sfl, sfl_run, start_sfl_run, trials_recorded

@@ -46,7 +46,7 @@ def test_telemetry_is_captured_without_rerun_and_sent_to_it(tmp_path):
     assert sink.paths() == {"joints/hip_l", "events/switch", "walker"}
     import rerun as rr
 
-    from sfl_brain.rerun_sink import RerunTelemetry
+    from sfl_brain.recording.rerun_sink import RerunTelemetry
 
     rec = rr.RecordingStream("sfl-test", recording_id="telemetry-test")
     path = tmp_path / "t.rrd"

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import stats as scipy_stats
 
-from sfl_brain import stats
+from sfl_brain.report import stats
 
 
 def test_a_bootstrap_interval_of_a_count_never_goes_below_zero_and_is_seeded():
@@ -95,7 +95,7 @@ def test_a_ratio_of_positive_values_is_tested_on_log_x():
 
 
 def test_a_page_s_claims_are_holm_adjusted_and_a_failed_one_is_not_shown(tmp_path):
-    from sfl_brain.report_study import Claim, bounded_cell, censored_cell, claims_table, tradeoff_figure
+    from sfl_brain.report.study import Claim, bounded_cell, censored_cell, claims_table, tradeoff_figure
 
     strong = stats.paired_log_t([10, 14, 7, 9, 12], [40, 61, 22, 35, 55])
     weak = stats.welch_log_t([18, 25, 15, 22, 19], [20, 30, 17, 25, 52])

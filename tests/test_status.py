@@ -15,7 +15,7 @@ import psutil
 import pytest
 
 from sfl_brain.events import Progress
-from sfl_brain.records import RecordWriter, inspect_run, read_records
+from sfl_brain.recording.records import RecordWriter, inspect_run, read_records
 from sfl_brain.status import EnvironmentProblem
 
 from .conftest import ROOT, SCENARIOS, sfl, sfl_run, wait_for_trials

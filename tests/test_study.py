@@ -15,9 +15,9 @@ import psutil
 import pytest
 from scipy import stats
 
-from sfl_brain.report_study import band, group_runs, moving_success_rate, short_names, t_interval, varied_keys
+from sfl_brain.report.study import band, group_runs, moving_success_rate, short_names, t_interval, varied_keys
 from sfl_brain.status import BadInput
-from sfl_brain.study import TrialCounter, core_slots, first_difference, parse_seeds, parse_vary
+from sfl_brain.study.study import TrialCounter, core_slots, first_difference, parse_seeds, parse_vary
 
 from .conftest import ROOT, SCENARIOS, sfl, wait_for_trials
 

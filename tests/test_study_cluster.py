@@ -12,7 +12,7 @@ from .conftest import SCENARIOS, sfl
 
 pytest.importorskip("distributed", reason="sfl study --cluster needs sfl-brain[cluster]")
 
-from sfl_brain.study_dask import loopback_cluster  # noqa: E402
+from sfl_brain.study.cluster import loopback_cluster  # noqa: E402
 
 
 def test_a_study_on_a_dask_cluster_brings_every_run_folder_back(tmp_path):

@@ -12,8 +12,15 @@ import pyarrow.parquet as pq
 
 from sfl_brain.messages import Learn
 from sfl_brain.modules.acc import ACC
-from sfl_brain.records import read_records
-from sfl_brain.tables import DECISION_COLUMNS, MAP_COLUMNS, TRIAL_COLUMNS, MapTable, columns_markdown, join_map_parts
+from sfl_brain.recording.records import read_records
+from sfl_brain.recording.tables import (
+    DECISION_COLUMNS,
+    MAP_COLUMNS,
+    TRIAL_COLUMNS,
+    MapTable,
+    columns_markdown,
+    join_map_parts,
+)
 from sfl_brain.telemetry import CaptureTelemetry, TelemetryTee
 
 from .conftest import ROOT, sfl

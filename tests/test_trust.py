@@ -10,10 +10,10 @@ import numpy as np
 import psutil
 import pytest
 
-from sfl_brain import bus
 from sfl_brain import messages as m
-from sfl_brain.local import run_local
-from sfl_brain.records import read_records
+from sfl_brain.protocols.local import run_local
+from sfl_brain.recording.records import read_records
+from sfl_brain.runtime import bus
 from sfl_brain.scenario import load
 
 from .conftest import SCENARIOS, TickStranger, listening_run
@@ -147,7 +147,7 @@ def test_garbage_on_every_key_of_a_running_run_changes_nothing(tmp_path):
 def test_a_peer_without_the_secret_is_answered_nothing(tmp_path):
     """Zenoh lets a stranger on loopback join the mesh (transport authentication is the user's, see
     docs/reliability.md), but nothing it sends without the secret is answered or applied."""
-    from sfl_brain.host import RemoteError, request
+    from sfl_brain.runtime.host import RemoteError, request
 
     out = tmp_path / "run"
     with listening_run(SCENARIOS / "analytic_learn.yaml", out, "protocol.trials=100000", modules=4) as run:
@@ -179,7 +179,7 @@ def test_a_peer_without_the_secret_is_answered_nothing(tmp_path):
 
 def test_a_signed_request_cannot_be_replayed_or_moved(tmp_path):
     """Inside the mesh, a request signed for one key does not work on another, and a replay is dropped."""
-    from sfl_brain.host import NoReply, request
+    from sfl_brain.runtime.host import NoReply, request
 
     out = tmp_path / "run"
     with listening_run(SCENARIOS / "analytic_learn.yaml", out, "protocol.trials=100000", modules=4) as run:

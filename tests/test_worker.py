@@ -7,7 +7,7 @@ import signal
 import subprocess
 import sys
 
-from sfl_brain import bus
+from sfl_brain.runtime import bus
 
 from .conftest import ROOT, SCENARIOS, Lines, listening_run, sfl
 
@@ -76,9 +76,9 @@ def test_worker_wrong_run_id_gives_up_and_ctrl_c_stops_a_waiting_worker(tmp_path
 def test_a_workers_lease_is_timeouts_lease_and_the_runs_own_processes_hold_a_day():
     """A worker on another machine cannot be seen, only heard: the run gives it up after its lease
     (``timeouts.lease``); the run's own processes declare a lease of a day, and are judged by their progress."""
-    from sfl_brain.runtime import Supervisor
+    from sfl_brain.runtime.supervisor import Supervisor
+    from sfl_brain.runtime.worker import worker_spec
     from sfl_brain.scenario import load
-    from sfl_brain.worker import worker_spec
 
     plan = load(LEARN, ["timeouts.lease=1.5"])
     assert worker_spec(plan, "run", "ext0", ["tcp/127.0.0.1:7447"], "secret")["lease_ms"] == 1500

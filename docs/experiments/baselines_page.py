@@ -8,7 +8,7 @@ Every run folder under ``RUNS/<walker>/<study>/`` is read (``records.jsonl``, ``
 runs are grouped by what they are (the proposer, its gate and settings, the vigilance), whatever study holds them.
 Only completed runs enter a number; the others are listed. The page's numbers, claims and figures are all computed
 here: the claims are a family fixed below (:func:`claims`) before any run was read, each with its test and Holm's
-adjustment over the family (:mod:`sfl_brain.stats`); a claim whose adjusted p is not below 0.05 is shown as *not
+adjustment over the family (:mod:`sfl_brain.report.stats`); a claim whose adjusted p is not below 0.05 is shown as *not
 shown*, and the text says so. ``numbers.json`` beside the figures holds every run's metrics.
 """
 
@@ -25,10 +25,10 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
-from sfl_brain import stats  # noqa: E402
-from sfl_brain.metrics import DISTINCT, K_GOOD, safe_learning  # noqa: E402
-from sfl_brain.records import read_records, run_status  # noqa: E402
-from sfl_brain.report_study import (  # noqa: E402
+from sfl_brain.recording.metrics import DISTINCT, K_GOOD, safe_learning  # noqa: E402
+from sfl_brain.recording.records import read_records, run_status  # noqa: E402
+from sfl_brain.report import stats  # noqa: E402
+from sfl_brain.report.study import (  # noqa: E402
     Claim,
     RunMetrics,
     StudySettings,
@@ -597,9 +597,9 @@ or draws, the same maps and the same trial noise), so those are paired t-tests o
 counts, log eta for best eta; the effect is the ratio of geometric means, its interval from the log scale (always
 positive). Against `sfl` the seeds do not pair (another proposer): Welch's t-test on log(x + 1). Failures before 10
 good gaits has censored runs: a Mann-Whitney test with every censored run taken where it hurts the claim (see
-`sfl_brain/stats.py`); with five seeds its p cannot go below 0.008. The p-values are two-sided, and Holm's step-down
-adjustment runs over every claim of the page; a claim **holds** when its adjusted p is below 0.05. One that does not
-is *not shown*, and the text does not make it."""
+`sfl_brain/report/stats.py`); with five seeds its p cannot go below 0.008. The p-values are two-sided, and Holm's
+step-down adjustment runs over every claim of the page; a claim **holds** when its adjusted p is below 0.05. One that
+does not is *not shown*, and the text does not make it."""
 EXPLORE_TEXT = """Each was run on two seeds before the final groups were chosen: veto or resample on seeds 0 and 1,
 which are also seeds of the final groups (their runs are the same, so the choice saw two of the five seeds), the
 first restarts on seeds 10 and 11. Gated CMA-ES with `veto` told every vetoed point to the strategy as a failure:

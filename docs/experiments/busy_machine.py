@@ -35,9 +35,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from sfl_brain.placement import usable_cpus  # noqa: E402
-from sfl_brain.provenance import made_here  # noqa: E402
-from sfl_brain.records import read_records  # noqa: E402
+from sfl_brain.recording.provenance import made_here  # noqa: E402
+from sfl_brain.recording.records import read_records  # noqa: E402
+from sfl_brain.runtime.placement import usable_cpus  # noqa: E402
 
 #: the learn runs: scenario and overrides of each body
 BODIES = {
@@ -81,7 +81,7 @@ def trials_in(run_dir: Path) -> int:
 
 
 def module_pid(run: subprocess.Popen, name: str) -> int:
-    """The process hosting module ``name`` (``python -m sfl_brain.host --name NAME``), a child of ``run``."""
+    """The process hosting module ``name`` (``python -m sfl_brain.runtime.host --name NAME``), a child of ``run``."""
     for entry in os.listdir("/proc"):
         if not entry.isdigit():
             continue

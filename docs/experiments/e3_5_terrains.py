@@ -42,8 +42,8 @@ from sfl_brain.body import InProcessLink  # noqa: E402
 from sfl_brain.messages import TrialRequest  # noqa: E402
 from sfl_brain.modules.acc import ACC  # noqa: E402
 from sfl_brain.modules.controllers.reflex import ReflexController  # noqa: E402
-from sfl_brain.provenance import made_here  # noqa: E402
-from sfl_brain.records import read_records  # noqa: E402
+from sfl_brain.recording.provenance import made_here  # noqa: E402
+from sfl_brain.recording.records import read_records  # noqa: E402
 
 
 def terrain(seed: int) -> str:

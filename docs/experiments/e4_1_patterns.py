@@ -50,7 +50,7 @@ from sfl_brain.modules.cpg.patterns import (  # noqa: E402
     log_energy,
     simulate_one_joint,
 )
-from sfl_brain.provenance import made_here  # noqa: E402
+from sfl_brain.recording.provenance import made_here  # noqa: E402
 
 DT = 0.01
 MARKER = {PLATEAU: "x", QUIESCENT: "*", ALMOST_OSCILLATOR: "+", OSCILLATOR: "o"}  # as Fig. 4.5

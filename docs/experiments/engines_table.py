@@ -20,8 +20,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
-from sfl_brain.records import read_records  # noqa: E402
-from sfl_brain.report_conditions import wilson  # noqa: E402
+from sfl_brain.recording.records import read_records  # noqa: E402
+from sfl_brain.report.conditions import wilson  # noqa: E402
 
 ENGINES = ("pybullet", "mujoco")
 

@@ -4,9 +4,9 @@
     python docs/images/render.py RUN_DIR --name chapter5 --timelines trial sim_time
 
 For each of the ``trial`` and ``sim_time`` timelines: the run's default blueprint
-(:func:`sfl_brain.rrlog.blueprint` with the run's layout, :func:`sfl_brain.rrlog.layout_of` of the scenario the run
-folder holds: the planar walker's, or the humanoid's of chapter 5) with that timeline selected is written to a
-``.rbl`` file,
+(:func:`sfl_brain.recording.rrlog.blueprint` with the run's layout, :func:`sfl_brain.recording.rrlog.layout_of` of
+the scenario the run folder holds: the planar walker's, or the humanoid's of chapter 5) with that timeline selected
+is written to a ``.rbl`` file,
 merged with the recording (whose own layout is only a default, so this one is shown), served over
 HTTP on 127.0.0.1 to the Rerun web viewer (``rerun --web-viewer``), and headless Chromium (software GL:
 ``--use-angle=swiftshader``), driven over its DevTools protocol, opens it and saves
@@ -39,7 +39,7 @@ from functools import partial
 from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
-from sfl_brain.rrlog import blueprint, layout_of
+from sfl_brain.recording.rrlog import blueprint, layout_of
 from sfl_brain.scenario import load
 
 

@@ -1,7 +1,8 @@
 """Golden chapter-3 records, one snapshot per numeric platform (``tests/golden/README.md``).
 
-Each snapshot is a folder of ``<case>.jsonl`` files (one record row per line, as :func:`sfl_brain.local.run_local`
-returns them, without their wall times and worker names) and a ``platform.json`` saying what wrote them and on what.
+Each snapshot is a folder of ``<case>.jsonl`` files (one record row per line, as
+:func:`~sfl_brain.protocols.local.run_local` returns them, without their wall times and worker names) and a
+``platform.json`` saying what wrote them and on what.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ COMPUTING = ("pymunk",)
 
 def run_case(name: str) -> list[dict]:
     """The case's record rows, computed now with every module in one process."""
-    from sfl_brain.local import run_local
+    from sfl_brain.protocols.local import run_local
     from sfl_brain.scenario import load
 
     path, sets = CASES[name]
@@ -40,7 +41,7 @@ def run_case(name: str) -> list[dict]:
 
 def platform_now() -> dict:
     """What decides the last bits of a golden case's floats on this machine (compared whole with a snapshot's)."""
-    from sfl_brain.provenance import numeric_platform, versions
+    from sfl_brain.recording.provenance import numeric_platform, versions
 
     return {"numeric_platform": numeric_platform(), "versions": versions(COMPUTING)}
 

@@ -12,7 +12,7 @@ import argparse
 import json
 from datetime import UTC, datetime
 
-from sfl_brain.provenance import source_commit
+from sfl_brain.recording.provenance import source_commit
 
 from . import CASES, HERE, ROOT, platform_now, run_case
 
