@@ -273,35 +273,19 @@ class Host:
                     )
                     sinks.append(controller.telemetry)
                     self.module.link = CountedLink(controller, self.progress)
-                elif self.module.COMMANDS and connect_end is not None:
-                    self.link = SocketLink(
-                        self.session,
-                        self.run_id,
-                        self.instance,
-                        spec["routes"][SensorFrame.TAG],
-                        spec["tick_timeout"],
-                        spec.get("spin", 0.0),
-                        endpoint=connect_end,
-                        secret=spec.get("secret"),
-                        drops=self.drops,
-                        controller_pid=self.controller_pid(),
-                        progress=self.progress,
-                    )
-                    self.module.link = self.link
-                elif self.module.COMMANDS:
-                    self.link = BusLink(
-                        self.session,
-                        self.run_id,
-                        self.instance,
-                        spec["routes"][SensorFrame.TAG],
-                        spec["tick_timeout"],
-                        spec.get("spin", 0.0),
-                        secret=spec.get("secret"),
-                        drops=self.drops,
-                        ticks=self.ticks,
-                        controller_pid=self.controller_pid(),
-                        progress=self.progress,
-                    )
+                elif self.module.COMMANDS:  # the body's end: its own socket to the controller, or the bus
+                    route, timeout = spec["routes"][SensorFrame.TAG], spec["tick_timeout"]
+                    args = (self.session, self.run_id, self.instance, route, timeout, spec.get("spin", 0.0))
+                    common = {
+                        "secret": spec.get("secret"),
+                        "drops": self.drops,
+                        "controller_pid": self.controller_pid(),
+                        "progress": self.progress,
+                    }
+                    if connect_end is not None:
+                        self.link = SocketLink(*args, endpoint=connect_end, **common)
+                    else:
+                        self.link = BusLink(*args, ticks=self.ticks, **common)
                     self.module.link = self.link
             for message_type in type(self.module).handles:
                 key_expr = bus.key(self.run_id, self.instance, message_type.TAG)
