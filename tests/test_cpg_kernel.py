@@ -22,6 +22,7 @@ from sfl_brain.modules.cpg.circuit import validate_circuit
 from sfl_brain.signals import names
 
 from .test_cpg import grid_circuit
+from .test_humanoid_speed import Recording
 
 pytest.importorskip("numba")
 
@@ -37,21 +38,6 @@ WALK = {
     "next_gain_roll": 1.1,
     "next_sigma_s": 4.0,
 }
-
-
-class Recording(InProcessLink):
-    """The link that keeps every frame and command of a trial."""
-
-    def __init__(self, controller) -> None:
-        super().__init__(controller)
-        self.frames: list[np.ndarray] = []
-        self.commands: list[np.ndarray] = []
-
-    def step(self, frame):
-        command = super().step(frame)
-        self.frames.append(np.array(frame.values))
-        self.commands.append(np.array(command.values))
-        return command
 
 
 def replay(kernel: str, frames: list[np.ndarray]) -> tuple[np.ndarray, CPGController]:
