@@ -353,6 +353,32 @@ class Humanoid(Body):
     def start_trial(self, request: TrialRequest) -> None:
         p = self.params
         body_params = request.body_params
+        pieces = self._trial_conditions(body_params)
+        if self.client is None:
+            self.client = pb.connect(pb.DIRECT)
+        # a world with a ball is another world: trials without one keep theirs, bit for bit
+        key = (pieces, self.ball_mass > 0)
+        if key != self._world_key:
+            self._build(pieces, ball=self.ball_mass > 0)
+        else:
+            # the contact cache is not part of a saved state: lift the robot clear and let collision detection
+            # drop its contact points, so that no trial inherits the last one's (then restore the start)
+            pb.resetBasePositionAndOrientation(self.robot, (0.0, 0.0, 100.0), (0, 0, 0, 1), physicsClientId=self.client)
+            pb.performCollisionDetection(physicsClientId=self.client)
+            pb.restoreState(self._saved, physicsClientId=self.client)
+        start_noise = float(body_params.get("start_noise", p.start_noise))  # a trial may set its own
+        if start_noise > 0:
+            offsets = np.random.default_rng(request.seed).normal(0.0, start_noise, N)
+            start = np.clip(self._start_pose + offsets, LOWER, UPPER)
+            for i, angle in zip(self.joint_index, start.tolist(), strict=True):
+                pb.resetJointState(self.robot, i, angle, 0.0, physicsClientId=self.client)
+        self._begin_trial()
+        if self.ball is not None:
+            pb.changeDynamics(self.ball, -1, mass=self.ball_mass, physicsClientId=self.client)
+
+    def _trial_conditions(self, body_params: dict) -> tuple[tuple[float, float], ...]:
+        """A trial's conditions from its parameters (each checked): the push, the ball, the terrain's pieces (returned)
+        and where the ground changes first. Shared by both engines."""
         for name in (*PUSH_RANGES, *START_RANGES):
             if name in body_params:
                 self.check_trial_param(name, body_params[name])
@@ -372,28 +398,15 @@ class Humanoid(Body):
         self._next_piece = pieces[0][0] * math.cos(pieces[0][1]) if len(pieces) > 1 else None
         self._next_slope = math.degrees(pieces[1][1]) if len(pieces) > 1 else None
         self.terrain_reached = -1.0  # s: when a foot first touched the next piece of ground (-1: not yet, or none)
-        if self.client is None:
-            self.client = pb.connect(pb.DIRECT)
-        # a world with a ball is another world: trials without one keep theirs, bit for bit
-        key = (pieces, self.ball_mass > 0)
-        if key != self._world_key:
-            self._build(pieces, ball=self.ball_mass > 0)
-        else:
-            # the contact cache is not part of a saved state: lift the robot clear and let collision detection
-            # drop its contact points, so that no trial inherits the last one's (then restore the start)
-            pb.resetBasePositionAndOrientation(self.robot, (0.0, 0.0, 100.0), (0, 0, 0, 1), physicsClientId=self.client)
-            pb.performCollisionDetection(physicsClientId=self.client)
-            pb.restoreState(self._saved, physicsClientId=self.client)
-        start_noise = float(body_params.get("start_noise", p.start_noise))  # a trial may set its own
-        if start_noise > 0:
-            offsets = np.random.default_rng(request.seed).normal(0.0, start_noise, N)
-            start = np.clip(self._start_pose + offsets, LOWER, UPPER)
-            for i, angle in zip(self.joint_index, start.tolist(), strict=True):
-                pb.resetJointState(self.robot, i, angle, 0.0, physicsClientId=self.client)
+        return pieces
+
+    def _begin_trial(self) -> None:
+        """The trial's clock, energy, judging state and logging buffers, and its first reads, once the start is set.
+        Shared by both engines."""
+        p = self.params
         self.ticks, self.t = 0, 0.0
         self.back = 0.0  # N: the touch sensor `back` (see actuate)
         self.energy = 0.0  # E_e (5.6), J
-        self.tau = np.zeros(N)
         self.fell = self.left_lane = self.finished = False
         self.finish_time = math.nan
         self._start_joints()
@@ -405,8 +418,6 @@ class Humanoid(Body):
         self._trace = [] if self.logging else None  # (t, sensor values, motor power W, (x, y, heading))
         self._frames = [] if self.logging else None  # (t, link poses, feet's centre of pressure and force)
         self._pushes = [] if self.logging else None  # (t, torso centre of mass, force) every physics step of a push
-        if self.ball is not None:
-            pb.changeDynamics(self.ball, -1, mass=self.ball_mass, physicsClientId=self.client)
 
     def _build(self, pieces: tuple[tuple[float, float], ...], ball: bool = False) -> None:
         """A new world: the ground of ``pieces``, the robot standing at x = 0 on it, and (``ball``) a ball resting on

@@ -45,9 +45,7 @@ from sfl_brain.bodies.humanoid import (
     LOWER,
     MAX_BACK,
     MOTOR,
-    PUSH_RANGES,
     SPEED,
-    START_RANGES,
     UPPER,
     G,
     Humanoid,
@@ -57,7 +55,6 @@ from sfl_brain.bodies.humanoid import (
 from sfl_brain.bodies.humanoid_mjcf import TREE_ORDER, world_mjcf
 from sfl_brain.bodies.humanoid_table import FSR_X, FSR_Y, LINKS, PARTS, SOLE, STANDING
 from sfl_brain.messages import TrialRequest
-from sfl_brain.telemetry import rates_of
 
 EXTRA = "pip install -e '.[mujoco]'"  # what installs MuJoCo with sfl-brain (pyproject's optional extra)
 
@@ -335,21 +332,8 @@ class HumanoidMujoco(Humanoid):
     def start_trial(self, request: TrialRequest) -> None:
         p = self.params
         body_params = request.body_params
-        for name in (*PUSH_RANGES, *START_RANGES):
-            if name in body_params:
-                self.check_trial_param(name, body_params[name])
-        self.push_force = float(body_params.get("push_force", 0.0))
-        self.push_start = float(body_params.get("push_time", 0.0))
-        self.push_end = self.push_start + float(body_params.get("push_duration", 0.0))
-        direction = math.radians(float(body_params.get("push_direction_deg", 0.0)))
-        self.push_vector = self.push_force * np.array([math.cos(direction), math.sin(direction), 0.0])
-        self.ball_mass = float(body_params.get("ball_mass", 0.0))
-        self.ball_speed = float(body_params.get("ball_speed", 0.0))
-        self.ball_time = float(body_params.get("ball_time", 0.0))
-        self.ball_height = float(body_params.get("ball_height", 0.0))
-        self.ball_impulse = self.ball_peak = 0.0
-        self._ball_thrown = False
-        pieces = self._pieces(body_params)
+        pieces = self._trial_conditions(body_params)
+        self._next_piece = None  # terrain_reached reads PyBullet's contact points: not measured on MuJoCo (yet)
         key = (pieces, self.ball_mass > 0)
         if key not in self._worlds:
             self._worlds[key] = self._build(pieces, ball=self.ball_mass > 0)
@@ -362,19 +346,7 @@ class HumanoidMujoco(Humanoid):
         if start_noise > 0:
             offsets = np.random.default_rng(request.seed).normal(0.0, start_noise, N)
             world.set_joints(np.clip(self._start_pose + offsets, LOWER, UPPER))
-        self.ticks, self.t = 0, 0.0
-        self.back = 0.0  # N: the touch sensor `back` (see actuate)
-        self.energy = 0.0  # E_e (5.6), J
-        self.fell = self.left_lane = self.finished = False
-        self.finish_time = math.nan
-        self._read_joints()  # the torques are 0 after a reset
-        self._read_torso()
-        rates = rates_of(self.telemetry)
-        self._signal_every = rates.signal_every(p.control_dt)
-        self._picture_every = rates.picture_every(p.control_dt)
-        self._trace = [] if self.logging else None  # (t, sensor values, motor power W, (x, y, heading))
-        self._frames = [] if self.logging else None  # (t, link poses, feet's centre of pressure and force)
-        self._pushes = [] if self.logging else None  # (t, torso centre of mass, force) every physics step of a push
+        self._begin_trial()  # the torques are 0 after a reset
 
     def _build(self, pieces: tuple[tuple[float, float], ...], ball: bool = False) -> MujocoWorld:
         """A world for ``pieces`` (and a ball): the model compiled, the robot placed standing at x = 0, that start
