@@ -67,3 +67,5 @@ done
 for name in switch switch_flat uphill_runup detectors; do
   sfl report "$OUT/${name}"_s0 "$OUT/${name}"_s1 "$OUT/${name}"_s2 --out "$RESULTS"
 done
+# the detectors compared on the same walks: McNemar's exact test against the thesis's torso band, Holm-adjusted
+python docs/experiments/e5_detectors_test.py "$OUT"
