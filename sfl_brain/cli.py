@@ -111,11 +111,10 @@ def run_command(
 ) -> None:
     """Run SCENARIO: one process per module, until the protocol completes (--resume RUN_DIR: go on with an
     interrupted learn run, replaying its recorded trials first)."""
-    from .runtime.progress import ProgressView
-    from .runtime.run import prepare_resume, run
-
     resumed = None
     if resume is not None:
+        from .runtime.run import prepare_resume
+
         options = (("SCENARIO", scenario), ("--set", overrides), ("--seed", seed), ("--out", out))
         given = [name for name, value in options if value not in (None, ())]
         if given:
@@ -128,6 +127,10 @@ def run_command(
         sys.exit(EXIT_BAD_INPUT)
     else:
         plan = _load_or_exit(scenario, overrides, seed)
+    # the runtime (Zenoh, Rerun, pyarrow: about 1.5 s of imports) only once the scenario is known to be good
+    from .runtime.progress import ProgressView
+    from .runtime.run import run
+
     view = ProgressView(plan, enabled=not quiet)
 
     def ready(sup, seconds):

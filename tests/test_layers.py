@@ -394,3 +394,46 @@ def test_the_paths_of_before_the_packages_import_the_same_modules():
     assert (OldSupervisor, write_report, plan_study) == (Supervisor, new_write_report, new_plan_study)
     with pytest.raises(AttributeError, match="module 'sfl_brain.runtime' has no attribute 'nothing'"):
         _ = importlib.import_module("sfl_brain.runtime").nothing
+
+
+#: imports the package makes where it runs without them (each inside ``try: ... except ImportError``), and what it
+#: then does: liveness reads /proc and falls back to psutil; provenance names the OpenBLAS core if threadpoolctl is
+#: there; pydantic_core ships inside pydantic.
+OPTIONAL_IMPORTS = {"psutil", "threadpoolctl", "pydantic_core"}
+
+
+def _normal(name: str) -> str:
+    return name.lower().replace("_", "-").replace(".", "-")
+
+
+def test_the_package_imports_only_what_it_declares():
+    """A user installs ``pip install -e .`` (or an extra) and nothing else: every third-party module that the package
+    imports is one of its dependencies or extras (pandas, for one, is not: it was only in the test extra, and a
+    report that used it failed on a user's install)."""
+    import ast
+    import importlib.metadata
+    import re
+    import tomllib
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    requirements = project["dependencies"] + [r for extra in project["optional-dependencies"].values() for r in extra]
+    declared = {_normal(re.match(r"[A-Za-z0-9_.-]+", r).group(0)) for r in requirements}
+    distributions = importlib.metadata.packages_distributions()
+    undeclared = []
+    for root in ("sfl_brain", "modules", "bodies"):
+        for path in sorted((ROOT / root).rglob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text(), str(path))):
+                if isinstance(node, ast.Import):
+                    names = [alias.name for alias in node.names]
+                elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                    names = [node.module]
+                else:
+                    continue
+                for name in names:
+                    top = name.split(".")[0]
+                    if top in sys.stdlib_module_names or top == "sfl_brain" or top in OPTIONAL_IMPORTS:
+                        continue
+                    owners = {_normal(d) for d in distributions.get(top, [top])}
+                    if not owners & declared:
+                        undeclared.append(f"{path.relative_to(ROOT)}:{node.lineno} imports {name} ({sorted(owners)})")
+    assert not undeclared, "imports of packages pyproject.toml does not declare:\n" + "\n".join(undeclared)

@@ -57,7 +57,7 @@ def test_each_trials_winning_neurons_are_series_and_labelled_points_over_the_map
         assert logged == {r["trial"]: r[f"{name}_winner"] for r in rows}, name
     # the highlight: at trial k, the neuron that won k's point, where it stood in the map that judged it (the
     # snapshot at index k: the maps after learning trial k - 1)
-    maps = pq.read_table(learn_run / "maps.parquet").to_pandas()
+    maps = pq.read_table(learn_run / "maps.parquet").to_pylist()
     for name in ("success", "failure"):
         points = {}
         for chunk in RrdReader(rrd).stream().to_chunks():
@@ -74,9 +74,13 @@ def test_each_trials_winning_neurons_are_series_and_labelled_points_over_the_map
         for r in rows:
             position, label = points[r["trial"]]
             assert label == f"{name} winner {r[f'{name}_winner']}"
-            snapshot = maps[(maps["trial"] == r["trial"]) & (maps["map"] == name) & ~maps["final"]]
             if r["trial"] > 0:  # no snapshot before the first trial
-                weights = snapshot[snapshot["neuron"] == r[f"{name}_winner"]]["weights"].iloc[0]
+                (weights,) = [
+                    m["weights"]
+                    for m in maps
+                    if m["trial"] == r["trial"] and m["map"] == name and not m["final"]
+                    if m["neuron"] == r[f"{name}_winner"]
+                ]
                 np.testing.assert_allclose(position, weights, atol=1e-6)
 
 

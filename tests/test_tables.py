@@ -7,7 +7,7 @@ import json
 import shutil
 
 import numpy as np
-import pandas as pd
+import pyarrow as pa
 import pyarrow.parquet as pq
 
 from sfl_brain.messages import Learn
@@ -37,19 +37,19 @@ def test_tables_are_typed_and_hold_every_row(tmp_path):
     done = sfl("run", str(CAUTIOUS), "--set", "protocol.trials=20", "--out", str(out), "--quiet")
     assert done.returncode == 0, done.stderr
     rows = read_records(out)
-    trials = pd.read_parquet(out / "trials.parquet")
-    decisions = pd.read_parquet(out / "decisions.parquet")
-    assert len(trials) == sum(r["kind"] == "trial" for r in rows) == 20
-    assert len(decisions) == sum(r["kind"] == "decision" for r in rows)
-    assert trials["success"].dtype == bool and decisions["go"].dtype == bool
-    assert trials["trial"].dtype == "int64" and trials["n_success"].dtype == "int64"
-    assert trials["trial"].tolist() == list(range(20))
+    trials = pq.read_table(out / "trials.parquet")
+    decisions = pq.read_table(out / "decisions.parquet")
+    assert trials.num_rows == sum(r["kind"] == "trial" for r in rows) == 20
+    assert decisions.num_rows == sum(r["kind"] == "decision" for r in rows)
+    assert trials.schema.field("success").type == pa.bool_() and decisions.schema.field("go").type == pa.bool_()
+    assert trials.schema.field("trial").type == pa.int64() and trials.schema.field("n_success").type == pa.int64()
+    assert trials.column("trial").to_pylist() == list(range(20))
     # a no-go decision has no trial: null, not NaN-as-float in an int column
-    no_go = decisions[~decisions["go"]]
-    assert no_go["trial"].isna().all() and len(no_go) > 0
-    assert decisions["trial"].dtype == "float64" or str(decisions["trial"].dtype) in ("Int64", "int64")
+    no_go = [d for d in decisions.to_pylist() if not d["go"]]
+    assert len(no_go) > 0 and all(d["trial"] is None for d in no_go)
+    assert decisions.schema.field("trial").type == pa.int64()
     # a failure has no reward
-    assert trials.loc[~trials["success"], "rho"].isna().all()
+    assert all(t["rho"] is None for t in trials.to_pylist() if not t["success"])
     schema = pq.read_schema(out / "trials.parquet")
     assert schema.field("wall_ms").metadata[b"unit"] == b"ms"
     assert schema.field("x").metadata[b"meaning"] == b"body.x: physical value"
@@ -57,17 +57,20 @@ def test_tables_are_typed_and_hold_every_row(tmp_path):
     assert schema.field("m_distance_to_centre").metadata[b"unit"] == b"unit space"
     assert str(schema.field("v_unit").type) == "list<element: double>"
     first = next(r for r in rows if r["kind"] == "trial")
-    assert trials.iloc[0]["quality"] == first["quality"] and list(trials.iloc[0]["v_unit"]) == first["v_unit"]
+    written = trials.slice(0, 1).to_pylist()[0]
+    assert written["quality"] == first["quality"] and written["v_unit"] == first["v_unit"]
     # the ACC's maps after every trial, and as the run left them (== acc.npz, which it checkpointed)
-    maps = pd.read_parquet(out / "maps.parquet")
-    assert maps["active"].dtype == bool and maps["final"].dtype == bool and maps["trial"].dtype == "int64"
-    assert sorted(maps.loc[~maps["final"], "trial"].unique()) == list(range(1, 21))
-    assert len(maps) == (20 + 1) * 2 * 100  # 20 snapshots and the final one, two 10 x 10 maps
+    maps = pq.read_table(out / "maps.parquet")
+    assert maps.schema.field("active").type == pa.bool_() and maps.schema.field("final").type == pa.bool_()
+    assert maps.schema.field("trial").type == pa.int64()
+    snapshots = maps.to_pylist()
+    assert sorted({m["trial"] for m in snapshots if not m["final"]}) == list(range(1, 21))
+    assert len(snapshots) == (20 + 1) * 2 * 100  # 20 snapshots and the final one, two 10 x 10 maps
     saved = np.load(out / "acc.npz")
     for name in ("success", "failure"):
-        final = maps[maps["final"] & (maps["map"] == name)].sort_values("neuron")
-        assert np.array_equal(np.stack(final["weights"]), saved[f"{name}_weights"])
-        assert final["active"].tolist() == saved[f"{name}_active"].tolist()
+        final = sorted((m for m in snapshots if m["final"] and m["map"] == name), key=lambda m: m["neuron"])
+        assert np.array_equal(np.array([m["weights"] for m in final]), saved[f"{name}_weights"])
+        assert [m["active"] for m in final] == saved[f"{name}_active"].tolist()
     assert pq.read_schema(out / "maps.parquet").field("weights").metadata[b"unit"] == b"unit space"
 
 
@@ -86,10 +89,11 @@ def test_map_table_writes_snapshots_as_they_come_and_joins_the_parts(tmp_path):
     (tmp_path / "maps" / "killed.parquet").write_bytes(b"PAR1 not finished")  # a process killed mid-write
     assert join_map_parts(tmp_path) == tmp_path / "maps.parquet"
     assert [p.name for p in (tmp_path / "maps").iterdir()] == ["killed.parquet"]  # left for a person to look at
-    maps = pd.read_parquet(tmp_path / "maps.parquet")
-    assert maps["trial"].tolist()[:6] == [1] * 6 and set(maps["map"]) == {"success", "failure"}
-    last = maps[(maps["trial"] == 3) & (maps["map"] == "success")].sort_values("neuron")
-    assert np.array_equal(np.stack(last["weights"]), acc.success_map.weights) and last["active"].all()
+    maps = pq.read_table(tmp_path / "maps.parquet").to_pylist()
+    assert [m["trial"] for m in maps][:6] == [1] * 6 and {m["map"] for m in maps} == {"success", "failure"}
+    last = sorted((m for m in maps if m["trial"] == 3 and m["map"] == "success"), key=lambda m: m["neuron"])
+    assert np.array_equal(np.array([m["weights"] for m in last]), acc.success_map.weights)
+    assert all(m["active"] for m in last)
 
 
 def test_records_doc_lists_every_fixed_column():

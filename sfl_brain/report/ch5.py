@@ -317,7 +317,8 @@ def _maps_figure(run: Run, out: Path) -> str:
     table = run.dir / "maps.parquet"
     if run.maps is None or not table.exists():
         return ""
-    snapshots = pq.read_table(table).to_pandas()
+    snapshots = pq.read_table(table, columns=["map", "final", "trial", "neuron", "weights"]).to_pydict()
+    columns = {key: np.asarray(values, dtype=object) for key, values in snapshots.items()}
     successes = [r for r in run.trials if r.get("success")]
     if len(successes) < 4:
         return ""
@@ -325,12 +326,13 @@ def _maps_figure(run: Run, out: Path) -> str:
     fig = plt.figure(figsize=(11, 5))
     for k, (title, trial, final) in enumerate((("after 4 successes", fourth, False), ("at the end", None, True))):
         ax = fig.add_subplot(1, 2, k + 1, projection="3d")
-        rows = snapshots[(snapshots["map"] == "success") & (snapshots["final"] == final)]
+        keep = (columns["map"] == "success") & (columns["final"] == final)
         if trial is not None:
-            rows = rows[rows["trial"] == trial]
-        if rows.empty:
+            keep &= columns["trial"] == trial
+        if not keep.any():
             continue
-        weights = np.stack(rows.sort_values("neuron")["weights"].to_numpy())
+        order = np.argsort(columns["neuron"][keep].astype(int), kind="stable")
+        weights = np.array([columns["weights"][keep][i] for i in order], dtype=float)
         reward = run.maps["success_reward"] if final else None
         colours = reward if reward is not None and np.isfinite(reward).any() else "tab:green"
         cmap = "viridis" if not isinstance(colours, str) else None
