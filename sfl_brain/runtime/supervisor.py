@@ -45,7 +45,6 @@ import shutil
 import socket
 import tempfile
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import zenoh
@@ -68,10 +67,21 @@ from ..protocols.service import Interrupted, Outcome, RunError
 from ..scenario.plan import Instance, Plan
 from ..status import EnvironmentProblem
 from . import bus, processes, ticklink
+from .inbox import (  # noqa: F401 - RETRYABLE: ``sfl_brain.runtime.RETRYABLE`` of before issue 30
+    RETRYABLE,
+    HungController,
+    Pending,
+    QueryEnded,
+    Replied,
+    TokenDeclared,
+    TokenGone,
+    Wake,
+    remote_fault,
+)
 from .liveness import NoProgressClock, ProgressBoard, cpu_sample
 from .placement import BUSY, CoreWatch, Pair, Placement, core_load, pin_process, place, usable_cpus
 from .processes import Child, Exited, kill_quietly, log_tail
-from .ticklink import WATCHED_WAIT, ControllerHung, LinkError
+from .ticklink import WATCHED_WAIT, ControllerHung, LinkError  # noqa: F401 - LinkError: as RETRYABLE
 
 __all__ = ["RUN_TOKEN", "Interrupted", "RunError", "Supervisor", "hosted_spec", "kill_quietly", "log_tail"]
 
@@ -83,69 +93,8 @@ RUN_TOKEN = "@run"
 #: the longest path of a Unix socket, with its final NUL (Linux 108, macOS 104: the shorter)
 UNIX_PATH_MAX = 104
 
-#: exception types a module host names in an error reply that mean "cut short, send it again"
-RETRYABLE = frozenset({LinkError.__name__, ControllerHung.__name__})
-
 #: s between two looks at the processes the run waits on (:mod:`.liveness`)
 WATCH_PERIOD = 0.5
-
-
-# ---------------------------------------------------------------- what arrives on the supervisor's queue
-@dataclass(frozen=True)
-class TokenDeclared:
-    """A liveliness token with a valid proof: ``nonce`` is the spawn it was made for."""
-
-    name: str
-    nonce: str
-
-
-@dataclass(frozen=True)
-class TokenGone:
-    name: str
-    nonce: str
-
-
-@dataclass(frozen=True)
-class Replied:
-    """A signed reply (or error reply) to request ``ticket``."""
-
-    ticket: int
-    outcome: Outcome
-
-
-@dataclass(frozen=True)
-class QueryEnded:
-    """Zenoh finished request ``ticket`` (after its replies, or at its time-out without one)."""
-
-    ticket: int
-
-
-@dataclass(frozen=True)
-class HungController:
-    """Body worker ``body`` found its controller process hung (:class:`~sfl_brain.runtime.ticklink.ControllerHung`)."""
-
-    body: str
-
-
-@dataclass(frozen=True)
-class Wake:
-    """Nothing happened: wakes the waiting thread to look at :meth:`Supervisor.raise_at_wait`'s request."""
-
-
-@dataclass
-class Pending:
-    target: str
-    message: Message
-    outcome: Outcome | None = None
-    done: bool = False
-    #: s its target may have the CPU without answering (``timeouts.request`` or ``timeouts.trial``)
-    limit: float = float("inf")
-
-
-def remote_fault(target: str, tag: str, text: str) -> RunError | Interrupted:
-    """The fault of an error reply ``text`` (``ExceptionType: detail``, as the host sends it)."""
-    fault = Interrupted if text.partition(":")[0] in RETRYABLE else RunError
-    return fault(f"`{target}` failed on `{tag}`: {text}")
 
 
 def lockstep_pairs(plan: Plan) -> tuple[list[Pair], list[str]]:
