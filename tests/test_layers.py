@@ -35,6 +35,9 @@ LEARN = SCENARIOS / "analytic_learn.yaml"
 ZENOH_SIDE = (
     "zenoh",
     "sfl_brain.runtime.supervisor",
+    "sfl_brain.runtime.inbox",
+    "sfl_brain.runtime.pairs",
+    "sfl_brain.runtime.watch",
     "sfl_brain.runtime.bus",
     "sfl_brain.runtime.host",
     "sfl_brain.runtime.processes",

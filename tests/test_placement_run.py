@@ -86,7 +86,7 @@ def test_a_run_limited_to_one_core_by_taskset_pins_nothing(tmp_path):
 
 @pytest.mark.skipif(len(all_cores()) < 2, reason="one core: nothing is pinned")
 def test_a_pairs_core_that_other_work_comes_to_keep_busy_makes_the_placement_yield(tmp_path):
-    """The supervisor's look at the cores (``Supervisor._yield_cores``, every RECHECK_S s) with real processes: a
+    """The supervisor's look at the cores (``Pairs.yield_cores``, every RECHECK_S s) with real processes: a
     body and a controller pinned to one core, and a process that comes to spin there. The placement yields: a new
     placement on the load measured (the pair on a quiet core, or nothing pinned), every process moved as it says,
     the user told, placement.json keeping the first placement under ``earlier``."""
@@ -105,12 +105,13 @@ def test_a_pairs_core_that_other_work_comes_to_keep_busy_makes_the_placement_yie
     plan = load(QUICK, list(SETS))
     cores = all_cores()
     sup = Supervisor(plan, tmp_path, "yield")
+    pairs = sup.pairs
     (tmp_path / "logs").mkdir()
     pair = (cores[-1],)
     rest = tuple(cores[:-1])
     placed = {"body": pair, "controller": pair, "acc": rest, "vigilance": rest, "ofc": rest}
-    sup.placement = Placement("auto", tuple(cores), placed, "body and controller share the last core")
-    sup._write_placement()
+    pairs.placement = Placement("auto", tuple(cores), placed, "body and controller share the last core")
+    pairs.write()
     told = []
     sup.events.subscribe(PlacementYielded, told.append)
     sleeper = [sys.executable, "-c", "import time; time.sleep(600)"]
@@ -124,8 +125,8 @@ def test_a_pairs_core_that_other_work_comes_to_keep_busy_makes_the_placement_yie
             [sys.executable, "-c", "while True: pass"], preexec_fn=lambda: os.sched_setaffinity(0, set(pair))
         )
         procs.append(spin)
-        sup._yield_cores()  # the first look starts the measurement
-        poll_until(lambda: (sup._yield_cores(), told)[1], "the placement to yield", timeout=60)
+        pairs.yield_cores(sup.children)  # the first look starts the measurement
+        poll_until(lambda: (pairs.yield_cores(sup.children), told)[1], "the placement to yield", timeout=60)
         # every process where the new placement says (the pair on a quiet core, or on every core)
         moved = {name: psutil.Process(child.proc.pid).cpu_affinity() for name, child in sup.children.items()}
     finally:
@@ -133,13 +134,13 @@ def test_a_pairs_core_that_other_work_comes_to_keep_busy_makes_the_placement_yie
             proc.kill()
             proc.wait()
     (event,) = told
-    assert event.busy.startswith(f"core {pair[0]} ") and event.placement == sup.placement.describe()
-    assert sup.placement.of("body") != list(pair) and sup.placement.of("body") == sup.placement.of("controller")
-    assert moved == {name: sup.placement.of(name) or cores for name in sup.children}
+    assert event.busy.startswith(f"core {pair[0]} ") and event.placement == pairs.placement.describe()
+    assert pairs.placement.of("body") != list(pair) and pairs.placement.of("body") == pairs.placement.of("controller")
+    assert moved == {name: pairs.placement.of(name) or cores for name in sup.children}
     assert moved["body"] != list(pair)
     written = json.loads((tmp_path / "logs" / "placement.json").read_text())
     assert written["earlier"][0]["cores"] == {name: list(c) for name, c in placed.items()}
-    assert written["cores"] == {name: list(c) for name, c in sup.placement.cores.items()}
+    assert written["cores"] == {name: list(c) for name, c in pairs.placement.cores.items()}
 
 
 def test_on_its_link_the_body_takes_only_its_trials_command_and_counts_the_rest(tmp_path):

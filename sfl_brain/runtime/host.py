@@ -182,6 +182,15 @@ class Host:
         self._stop_asked = False  # stop() was called: the main loop leaves before the next request
         self.link: TickLink | None = None  # a body's link to its controller in another process
         self.ticks: zenoh.Session | None = None  # the lockstep link of a body worker or its controller process
+        # what serve() opens besides, closed at its end: the recording and the telemetry sinks (after their
+        # modules), a controller hosted in this body worker, a controller's end of a socket lockstep link, the
+        # stream threads on a Zenoh lockstep link and the request queryables
+        self._rec = None
+        self._sinks: list = []
+        self._colocated: Controller | None = None
+        self._server: ticklink.Server | None = None
+        self._streams: list[tuple[str, Any, threading.Thread]] = []
+        self._declared: list = []
         self.seal = bus.Seal(spec.get("secret"))
         self.drops = bus.Drops(log, self.instance)
         self._seen: deque[bytes] = deque(maxlen=self.SEEN)
@@ -222,6 +231,8 @@ class Host:
         return bus.key(self.run_id, self.spec["routes"][tag], tag)
 
     def serve(self) -> None:
+        """Build the module, open the run's session and the lockstep link, answer the module's messages until the
+        host stops, and close whatever was opened, whatever happened."""
         spec = self.spec
         self.module = make_module(spec["reference"], spec["params"], spec["seed"], spec["spec_name"])
         self.module.run_dir = self.run_dir  # where the module may write files (None: anywhere)
@@ -231,124 +242,151 @@ class Host:
             zenoh_config=spec.get("zenoh_config"),
             lease_ms=spec.get("lease_ms", bus.LEASE_MS),
         )
-        declared = []
-        streams: list[tuple[str, Any, threading.Thread]] = []
-        rec = None
-        sinks = []  # telemetry sinks to close at exit (after their modules)
-        controller = None  # a controller hosted in this body worker
-        server = None  # a controller's end of a socket lockstep link
-        ticks = self.session
         try:
-            # a body worker and its controller process: their lockstep link ({"listen": ...} for the
-            # controller, {"connect": ...} for the body), or the mesh when the spec names none
-            tick = spec.get("tick") or {}
-            ends = [f"listening on {e}" for e in tick.get("listen", [])] + [
-                f"connecting to {e}" for e in tick.get("connect", [])
-            ]
-            listen_end = next((e for e in tick.get("listen", []) if ticklink.is_socket(e)), None)
-            connect_end = next((e for e in tick.get("connect", []) if ticklink.is_socket(e)), None)
-            socket_end = listen_end or connect_end
-            if socket_end is not None:  # lockstep.link: socket (sfl_brain.runtime.ticklink)
-                log.info("lockstep link (socket): %s", ", ".join(ends))
-            elif tick:  # lockstep.link: zenoh
-                self.ticks = ticks = bus.open_tick_session(tick.get("listen", []), tick.get("connect", []))
-                log.info("lockstep link (lowlatency): %s", ", ".join(ends))
-            rec = make_recording(self.run_id, spec.get("rrd"), spec.get("viewer"))
-            live = bool(spec.get("viewer"))
-            seconds = spec.get("trial_seconds")
-            self.module.telemetry = make_telemetry(
-                rec, self.module, spec.get("record"), self.run_dir, self.instance, live, seconds
-            )
-            sinks.append(self.module.telemetry)
+            listen_end, connect_end = self._open_tick_link()
+            self._open_recording()
             if isinstance(self.module, Body):
-                self.module.worker = self.instance
-                self.module.realtime = bool(spec.get("realtime"))
-                colocated = spec.get("colocated")
-                if colocated:
-                    controller = make_module(
-                        colocated["reference"], colocated["params"], colocated["seed"], colocated["spec_name"]
-                    )
-                    controller.telemetry = make_telemetry(
-                        rec, controller, spec.get("record"), self.run_dir, f"{self.instance}.controller", live, seconds
-                    )
-                    sinks.append(controller.telemetry)
-                    self.module.link = CountedLink(controller, self.progress)
-                elif self.module.COMMANDS:  # the body's end: its own socket to the controller, or the bus
-                    route, timeout = spec["routes"][SensorFrame.TAG], spec["tick_timeout"]
-                    args = (self.session, self.run_id, self.instance, route, timeout, spec.get("spin", 0.0))
-                    common = {
-                        "secret": spec.get("secret"),
-                        "drops": self.drops,
-                        "controller_pid": self.controller_pid(),
-                        "progress": self.progress,
-                    }
-                    if connect_end is not None:
-                        self.link = SocketLink(*args, endpoint=connect_end, **common)
-                    else:
-                        self.link = BusLink(*args, ticks=self.ticks, **common)
-                    self.module.link = self.link
-            for message_type in type(self.module).handles:
-                key_expr = bus.key(self.run_id, self.instance, message_type.TAG)
-                if message_type.STREAM and listen_end is not None:  # a thread per connection blocks in recv()
-                    if server is not None:
-                        raise ValueError(f"{self.instance}: a socket lockstep link carries one stream message type")
-                    answer = functools.partial(self._stream_answer, message_type, decoder_for(message_type))
-                    server = ticklink.Server(
-                        listen_end,
-                        answer,
-                        on_refused=lambda: self.drops("foreign", "lockstep connection", "too many connections"),
-                        on_oversized=lambda n, t=message_type.TAG: self.drops("malformed", f"{t} frame", f"{n} B"),
-                    )
-                elif message_type.STREAM:  # one thread blocks in recv(): no Python handoff per tick
-                    subscriber = ticks.declare_subscriber(key_expr, zenoh.handlers.RingChannel(64))
-                    thread = threading.Thread(
-                        target=self._stream_loop,
-                        args=(subscriber, message_type),
-                        daemon=True,
-                        name=f"stream-{message_type.TAG}",
-                    )
-                    thread.start()
-                    streams.append((key_expr, subscriber, thread))
-                else:
-                    callback = zenoh.handlers.Callback(self._enqueue, indirect=False)
-                    declared.append(self.session.declare_queryable(key_expr, callback))
+                self._wire_body(connect_end)
+            self._declare_handlers(listen_end)
             proof = self.seal.alive_proof(self.run_id, self.instance, spec.get("nonce") or os.urandom(8).hex())
             token = self.session.liveliness().declare_token(bus.alive_key(self.run_id, self.instance, proof))
             log.info("%s ready (%s)", self.instance, spec["reference"])
             self._loop()
             token.undeclare()
         finally:
-            self._stopping = True
-            if server is not None:
-                server.close()
-            for key_expr, subscriber, thread in streams:
-                ticks.put(key_expr, b"")  # wakes the stream thread, which sees _stopping
-                thread.join(timeout=2.0)
-                if not thread.is_alive():
-                    subscriber.undeclare()
-            for d in declared:
-                d.undeclare()
-            if self.link is not None:
-                self.link.close()
-            for p in self._publishers.values():
-                p.undeclare()
-            self.module.close()
-            if controller is not None:
-                controller.close()  # its last logged trial's neurons
-            for sink in sinks:
-                if sink is not None:
-                    sink.close()
-            if rec is not None:
-                from ..recording.rrlog import close_recording
+            self._close()
 
-                problem = close_recording(rec)
-                if problem is not None:
-                    log.warning("%s: the Rerun recording did not reach the disk (%s)", self.instance, problem)
-            if self.ticks is not None:
-                self.ticks.close()
-            self.session.close()
-            self.write_counters()
-            # the board stays mapped until the process exits: a lockstep thread still returning may count a tick
+    def _open_tick_link(self) -> tuple[str | None, str | None]:
+        """A body worker's and its controller process's lockstep link (``{"listen": ...}`` for the controller,
+        ``{"connect": ...}`` for the body), or the mesh when the spec names none. A Zenoh link is opened here
+        (:attr:`ticks`); a socket link's ends are returned, (listen, connect), for the server and the body's link."""
+        tick = self.spec.get("tick") or {}
+        ends = [f"listening on {e}" for e in tick.get("listen", [])] + [
+            f"connecting to {e}" for e in tick.get("connect", [])
+        ]
+        listen_end = next((e for e in tick.get("listen", []) if ticklink.is_socket(e)), None)
+        connect_end = next((e for e in tick.get("connect", []) if ticklink.is_socket(e)), None)
+        socket_end = listen_end or connect_end
+        if socket_end is not None:  # lockstep.link: socket (sfl_brain.runtime.ticklink)
+            log.info("lockstep link (socket): %s", ", ".join(ends))
+        elif tick:  # lockstep.link: zenoh
+            self.ticks = bus.open_tick_session(tick.get("listen", []), tick.get("connect", []))
+            log.info("lockstep link (lowlatency): %s", ", ".join(ends))
+        return listen_end, connect_end
+
+    def _open_recording(self) -> None:
+        """The process's Rerun recording, and the module's telemetry into it."""
+        self._rec = make_recording(self.run_id, self.spec.get("rrd"), self.spec.get("viewer"))
+        self.module.telemetry = self._telemetry(self.module, self.instance)
+
+    def _telemetry(self, module: Module, part: str) -> TelemetryTee | None:
+        """A module's telemetry sinks (closed at the end, after the module); ``part``: its name in the run folder."""
+        spec = self.spec
+        live = bool(spec.get("viewer"))
+        telemetry = make_telemetry(
+            self._rec, module, spec.get("record"), self.run_dir, part, live, spec.get("trial_seconds")
+        )
+        self._sinks.append(telemetry)
+        return telemetry
+
+    def _wire_body(self, connect_end: str | None) -> None:
+        """A body worker's link to its controller: hosted here (``colocate: true``), or in its own process over the
+        lockstep link (a socket when ``connect_end`` names one; else Zenoh, the lockstep session or the mesh)."""
+        spec = self.spec
+        self.module.worker = self.instance
+        self.module.realtime = bool(spec.get("realtime"))
+        colocated = spec.get("colocated")
+        if colocated:
+            self._colocated = make_module(
+                colocated["reference"], colocated["params"], colocated["seed"], colocated["spec_name"]
+            )
+            self._colocated.telemetry = self._telemetry(self._colocated, f"{self.instance}.controller")
+            self.module.link = CountedLink(self._colocated, self.progress)
+        elif self.module.COMMANDS:  # the body's end: its own socket to the controller, or the bus
+            link, transport = (
+                (SocketLink, {"endpoint": connect_end}) if connect_end is not None else (BusLink, {"ticks": self.ticks})
+            )
+            self.link = link(
+                self.session,
+                self.run_id,
+                self.instance,
+                spec["routes"][SensorFrame.TAG],
+                spec["tick_timeout"],
+                spec.get("spin", 0.0),
+                secret=spec.get("secret"),
+                drops=self.drops,
+                controller_pid=self.controller_pid(),
+                progress=self.progress,
+                **transport,
+            )
+            self.module.link = self.link
+
+    def _declare_handlers(self, listen_end: str | None) -> None:
+        """Answer each message type the module handles: a request on a queryable (its queries go to the main loop);
+        a lockstep stream message on the socket link's server (``listen_end``) or in a thread that blocks on a
+        subscriber of the lockstep session (or the mesh)."""
+        ticks = self.ticks or self.session
+        for message_type in type(self.module).handles:
+            key_expr = bus.key(self.run_id, self.instance, message_type.TAG)
+            if message_type.STREAM and listen_end is not None:  # a thread per connection blocks in recv()
+                if self._server is not None:
+                    raise ValueError(f"{self.instance}: a socket lockstep link carries one stream message type")
+                answer = functools.partial(self._stream_answer, message_type, decoder_for(message_type))
+                self._server = ticklink.Server(
+                    listen_end,
+                    answer,
+                    on_refused=lambda: self.drops("foreign", "lockstep connection", "too many connections"),
+                    on_oversized=lambda n, t=message_type.TAG: self.drops("malformed", f"{t} frame", f"{n} B"),
+                )
+            elif message_type.STREAM:  # one thread blocks in recv(): no Python handoff per tick
+                subscriber = ticks.declare_subscriber(key_expr, zenoh.handlers.RingChannel(64))
+                thread = threading.Thread(
+                    target=self._stream_loop,
+                    args=(subscriber, message_type),
+                    daemon=True,
+                    name=f"stream-{message_type.TAG}",
+                )
+                thread.start()
+                self._streams.append((key_expr, subscriber, thread))
+            else:
+                callback = zenoh.handlers.Callback(self._enqueue, indirect=False)
+                self._declared.append(self.session.declare_queryable(key_expr, callback))
+
+    def _close(self) -> None:
+        """Close what :meth:`serve` opened, the lockstep threads and links first, the sessions last; then write the
+        drop counters."""
+        self._stopping = True
+        if self._server is not None:
+            self._server.close()
+        ticks = self.ticks or self.session
+        for key_expr, subscriber, thread in self._streams:
+            ticks.put(key_expr, b"")  # wakes the stream thread, which sees _stopping
+            thread.join(timeout=2.0)
+            if not thread.is_alive():
+                subscriber.undeclare()
+        for d in self._declared:
+            d.undeclare()
+        if self.link is not None:
+            self.link.close()
+        for p in self._publishers.values():
+            p.undeclare()
+        self.module.close()
+        if self._colocated is not None:
+            self._colocated.close()  # its last logged trial's neurons
+        for sink in self._sinks:
+            if sink is not None:
+                sink.close()
+        if self._rec is not None:
+            from ..recording.rrlog import close_recording
+
+            problem = close_recording(self._rec)
+            if problem is not None:
+                log.warning("%s: the Rerun recording did not reach the disk (%s)", self.instance, problem)
+        if self.ticks is not None:
+            self.ticks.close()
+        self.session.close()
+        self.write_counters()
+        # the board stays mapped until the process exits: a lockstep thread still returning may count a tick
 
     def write_counters(self) -> None:
         """``<run_dir>/logs/<instance>.counters.json``: ``{"dropped": {reason: n}}``."""

@@ -46,6 +46,11 @@ class Child:
     def name(self) -> str:
         return self.instance.name
 
+    @property
+    def starting(self) -> bool:
+        """Its process runs but is not alive yet (its liveliness token not seen), and is not being stopped."""
+        return not self.alive and not self.stopping and self.proc is not None and self.proc.poll() is None
+
 
 @dataclass(frozen=True)
 class Exited:

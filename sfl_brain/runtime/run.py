@@ -27,7 +27,7 @@ import time
 import traceback
 import uuid
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
 
@@ -359,21 +359,7 @@ def run(
     ``interrupted``, with ``stop_reason`` and the ``exit_code`` the CLI ends with.
     """
     run_dir = Path(out) if out else default_run_dir(plan)
-    if viewer is True:
-        check_viewer()
-    if resume is None:
-        prepare_run_dir(run_dir)
-    viewer_proc, viewer_url = None, None
-    if viewer:
-        viewer_proc, viewer_url = start_viewer() if viewer is True else (None, viewer)
-    run_id = (resume and resume.run_id) or uuid.uuid4().hex[:12]  # resumed: the same recording id
-    previous_recordings: list[str] = []
-    if resume is None:
-        (run_dir / "scenario.yaml").write_text(yaml.safe_dump(self_contained(plan, run_dir), sort_keys=False))
-        (run_dir / "provenance.json").write_text(json.dumps({**provenance(), "run_id": run_id}, indent=2) + "\n")
-        (run_dir / "started").write_text(datetime.now().isoformat() + "\n")
-    else:  # the scenario, provenance and start stay the run's; the records and recording go on
-        previous_recordings = continue_run_dir(run_dir, resume)
+    run_id, viewer_url, earlier = _open_run_dir(plan, run_dir, viewer, resume)
     writer = RecordWriter(run_dir / "records.jsonl")
     events = Events()
     sup = Supervisor(
@@ -387,100 +373,203 @@ def run(
         zenoh_config=zenoh_config,
         events=events,
     )
+    rr_log = _rerun_log(plan, run_dir, run_id, viewer_url, resume)
+    _subscribe(events, plan, writer, rr_log, on_progress)
+    started = time.perf_counter()
+    with _Stopping(sup) as stopping:
+        ended = _Ended()
+        try:
+            ended = _conduct(plan, sup, events, run_dir, resume, on_ready, started)
+        finally:
+            stopping.cleaning = True
+            cleanup = _close(plan, run_dir, sup, writer, rr_log, ended, stopping)
+    rows = read_records(run_dir)
+    _judge_run(ended, rows, cleanup, stopping)
+    wall = time.perf_counter() - started
+    if resume is not None:  # the time it had taken before, and where it went on from
+        wall += resume.wall_time_s or 0.0
+        ended.extra = ended.extra | {"resumed_from_trial": len(resume.trials), "previous_recordings": earlier}
+    return run_dir, _write_summary(plan, run_dir, sup, run_id, ended, rows, wall)
+
+
+def _open_run_dir(
+    plan: Plan, run_dir: Path, viewer: bool | str, resume: Resume | None
+) -> tuple[str, str | None, list[str]]:
+    """Check for a viewer, make the run folder (or make an interrupted run's ready to go on), start a viewer, and
+    write what the run starts from; returns (run id, the viewer's URL, the previous recordings' names)."""
+    if viewer is True:
+        check_viewer()
+    if resume is None:
+        prepare_run_dir(run_dir)
+    viewer_url = None
+    if viewer:
+        _, viewer_url = start_viewer() if viewer is True else (None, viewer)
+    run_id = (resume and resume.run_id) or uuid.uuid4().hex[:12]  # resumed: the same recording id
+    if resume is not None:  # the scenario, provenance and start stay the run's; the records and recording go on
+        return run_id, viewer_url, continue_run_dir(run_dir, resume)
+    (run_dir / "scenario.yaml").write_text(yaml.safe_dump(self_contained(plan, run_dir), sort_keys=False))
+    (run_dir / "provenance.json").write_text(json.dumps({**provenance(), "run_id": run_id}, indent=2) + "\n")
+    (run_dir / "started").write_text(datetime.now().isoformat() + "\n")
+    return run_id, viewer_url, []
+
+
+def _rerun_log(plan: Plan, run_dir: Path, run_id: str, viewer_url: str | None, resume: Resume | None) -> RerunLog:
+    """The supervisor's own recording stream, saved beside the modules' parts (also when streaming to a viewer)."""
     (run_dir / "rerun").mkdir(exist_ok=True)
-    rr_log = RerunLog(
+    return RerunLog(
         run_id,
-        str(run_dir / "rerun" / "_supervisor.rrd"),  # also saved when streaming to a viewer
+        str(run_dir / "rerun" / "_supervisor.rrd"),
         viewer_url,
         [a.name for a in plan.scenario.space],
         plan.trial_seconds,
         layout_of(plan),
         first_trial=len(resume.trials) if resume is not None else 0,
     )
+
+
+def _subscribe(
+    events: Events,
+    plan: Plan,
+    writer: RecordWriter,
+    rr_log: RerunLog,
+    on_progress: Callable[[Progress], None] | None,
+) -> None:
+    """The records, the Rerun log, the progress callback and the terminal lines, each told what it shows."""
     record_to(events, writer, decisions=plan.scenario.record.decisions)
     events.subscribe(DecisionsMade, lambda e: rr_log.decisions(e.rows))
     events.subscribe(TrialRecorded, lambda e: rr_log.trial(e.row))
     if on_progress is not None:
         events.subscribe(ProgressUpdated, lambda e: on_progress(e.progress))
     tell(events)
-    started = time.perf_counter()
-    status, reason, exit_code, extra = RunStatus.COMPLETED, "", None, {}
-    stopping = {"signals": 0, "cleaning": False}
-    cleanup: list[str] = []
 
-    def on_signal(signum, _frame):
+
+class _Stopping:
+    """The run's Ctrl-C / SIGTERM handler, installed while the run goes on (``with``) and the ones before it back
+    after: how many signals came, and whether the run is already cleaning up."""
+
+    def __init__(self, sup: Supervisor) -> None:
+        self.sup = sup
+        self.signals = 0
+        self.cleaning = False
+        self._previous: dict = {}
+
+    def __enter__(self) -> _Stopping:
+        self._previous = {sig: signal.signal(sig, self._on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+        return self
+
+    def __exit__(self, *_exc) -> None:
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+
+    def _on_signal(self, signum, _frame) -> None:
         # This handler never raises. Python runs it in the main thread at whatever Python code that thread runs
         # next, and that can be a Zenoh callback: with indirect=False, Zenoh calls the reply and query-end
         # callbacks of Supervisor.submit in the thread that happens to finish the query, sometimes the main
         # thread inside session.get. Zenoh logs what a callback raises ("callback error") and drops it: the
         # Ctrl-C was lost. So the first signal only asks the supervisor to raise it where the run waits for
-        # an event (it wakes the wait), in the run's own code, and the interrupted path below runs.
-        stopping["signals"] += 1
-        if not stopping["cleaning"] and stopping["signals"] == 1:
-            sup.raise_at_wait(KeyboardInterrupt if signum == signal.SIGINT else _Terminate)
+        # an event (it wakes the wait), in the run's own code, and the interrupted path of _conduct runs.
+        self.signals += 1
+        if not self.cleaning and self.signals == 1:
+            self.sup.raise_at_wait(KeyboardInterrupt if signum == signal.SIGINT else _Terminate)
             return
         # a second signal (or one while the run is already stopping): the fast path. Kill the
         # children now instead of waiting for them (a wait still to come raises the first signal); the
         # records, summary and recording are still written.
         print("sfl: stopping now: module processes killed; writing the summary", file=sys.stderr, flush=True)
-        for pid in sup.pids():
+        for pid in self.sup.pids():
             kill_quietly(pid)
 
-    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+@dataclass(kw_only=True)
+class _Ended:
+    """How the run ended: its status and why, the exit code when it is not its status's, what the protocol returned."""
+
+    status: RunStatus = RunStatus.COMPLETED
+    reason: str = ""
+    exit_code: int | None = None
+    extra: dict = field(default_factory=dict)
+
+
+def _conduct(
+    plan: Plan,
+    sup: Supervisor,
+    events: Events,
+    run_dir: Path,
+    resume: Resume | None,
+    on_ready: Callable[[Supervisor, float], None] | None,
+    started: float,
+) -> _Ended:
+    """Start the module processes and run the protocol; how that ended (a fault or a signal is a status, not raised)."""
     try:
+        sup.start()
+        if on_ready:
+            on_ready(sup, time.perf_counter() - started)
+        conductor = Conductor(plan, sup, events, run_dir, replay=resume.trials if resume else None)
+        return _Ended(extra=PROTOCOLS[plan.scenario.protocol.kind](conductor))
+    except (KeyboardInterrupt, _Terminate):
+        return _Ended(status=RunStatus.INTERRUPTED, reason="stopped by signal (Ctrl-C or SIGTERM)")
+    except RunError as exc:
+        return _Ended(status=RunStatus.FAILED, reason=str(exc))
+    except EnvironmentProblem as exc:
+        return _Ended(status=RunStatus.FAILED, reason=str(exc), exit_code=EXIT_ENVIRONMENT)
+    except OSError as exc:
+        reason = f"{exc.strerror or exc}" + (f": {exc.filename}" if exc.filename else "")
+        refused = exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM)
+        return _Ended(status=RunStatus.FAILED, reason=reason, exit_code=EXIT_ENVIRONMENT if refused else None)
+    except Exception as exc:  # a bug of ours or of a protocol: say so, keep the traceback in logs/
+        _log_internal(run_dir)
+        return _Ended(
+            status=RunStatus.FAILED, reason=f"internal error: {type(exc).__name__}: {exc} (see logs/_run.log)"
+        )
+
+
+def _close(
+    plan: Plan,
+    run_dir: Path,
+    sup: Supervisor,
+    writer: RecordWriter,
+    rr_log: RerunLog,
+    ended: _Ended,
+    stopping: _Stopping,
+) -> list[str]:
+    """Stop the modules, close the records and the Rerun log, merge the recording and write the tables; what went
+    wrong doing so, one line each. Every step runs whatever the others did: a full disk must not cost the summary."""
+    cleanup = []
+    for step in (
+        lambda: sup.stop(grace=0.0 if stopping.signals > 1 else 3.0),
+        writer.close,
+        # a full disk: rerun's writer has stopped, do not wait the healthy disk's time for it
+        lambda: rr_log.close(timeout=2.0 if ended.exit_code == EXIT_ENVIRONMENT else RERUN_FLUSH_TIMEOUT),
+        lambda: merge_recordings(run_dir),
+        lambda: write_tables(run_dir, plan.raw.get("space", []), plan.body_class.METRICS),
+    ):
         try:
-            sup.start()
-            if on_ready:
-                on_ready(sup, time.perf_counter() - started)
-            conductor = Conductor(plan, sup, events, run_dir, replay=resume.trials if resume else None)
-            extra = PROTOCOLS[plan.scenario.protocol.kind](conductor)
-        except (KeyboardInterrupt, _Terminate):
-            status, reason = RunStatus.INTERRUPTED, "stopped by signal (Ctrl-C or SIGTERM)"
-        except RunError as exc:
-            status, reason = RunStatus.FAILED, str(exc)
-        except EnvironmentProblem as exc:
-            status, reason, exit_code = RunStatus.FAILED, str(exc), EXIT_ENVIRONMENT
-        except OSError as exc:
-            status, reason = RunStatus.FAILED, f"{exc.strerror or exc}" + (f": {exc.filename}" if exc.filename else "")
-            if exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM):
-                exit_code = EXIT_ENVIRONMENT
-        except Exception as exc:  # a bug of ours or of a protocol: say so, keep the traceback in logs/
-            status, reason = RunStatus.FAILED, f"internal error: {type(exc).__name__}: {exc} (see logs/_run.log)"
+            step()
+        except Exception as exc:  # noqa: BLE001 - reported in the summary, never raised
+            cleanup.append(f"{type(exc).__name__}: {exc}")
             _log_internal(run_dir)
-        finally:
-            stopping["cleaning"] = True
-            # every step runs whatever the others did: a full disk must not cost the summary
-            for step in (
-                lambda: sup.stop(grace=0.0 if stopping["signals"] > 1 else 3.0),
-                writer.close,
-                # a full disk: rerun's writer has stopped, do not wait the healthy disk's time for it
-                lambda: rr_log.close(timeout=2.0 if exit_code == EXIT_ENVIRONMENT else RERUN_FLUSH_TIMEOUT),
-                lambda: merge_recordings(run_dir),
-                lambda: write_tables(run_dir, plan.raw.get("space", []), plan.body_class.METRICS),
-            ):
-                try:
-                    step()
-                except Exception as exc:  # noqa: BLE001 - reported in the summary, never raised
-                    cleanup.append(f"{type(exc).__name__}: {exc}")
-                    _log_internal(run_dir)
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+    return cleanup
+
+
+def _judge_run(ended: _Ended, rows: list[dict], cleanup: list[str], stopping: _Stopping) -> None:
+    """The run's status and stop reason, from how it ended, its records, its clean-up and the signals it got."""
     if cleanup:
-        reason += ("; " if reason else "") + "while stopping: " + "; ".join(cleanup)
-    rows = read_records(run_dir)
-    if status == RunStatus.COMPLETED:
-        status, reason = _judge(extra, sum(1 for r in rows if r.get("kind") == "trial"))
-    if status == RunStatus.INTERRUPTED and stopping["signals"] > 1:
-        reason += "; stopped at once by a second signal"
-    wall = time.perf_counter() - started
-    if resume is not None:
-        wall += resume.wall_time_s or 0.0
-        extra = {**extra, "resumed_from_trial": len(resume.trials), "previous_recordings": previous_recordings}
+        ended.reason += ("; " if ended.reason else "") + "while stopping: " + "; ".join(cleanup)
+    if ended.status == RunStatus.COMPLETED:
+        ended.status, ended.reason = _judge(ended.extra, sum(1 for r in rows if r.get("kind") == "trial"))
+    if ended.status == RunStatus.INTERRUPTED and stopping.signals > 1:
+        ended.reason += "; stopped at once by a second signal"
+
+
+def _write_summary(
+    plan: Plan, run_dir: Path, sup: Supervisor, run_id: str, ended: _Ended, rows: list[dict], wall: float
+) -> dict:
+    """``summary.json``: the run's status, its records summed up, what it dropped; written last."""
+    extra = ended.extra
     summary = {
-        "status": str(status),
-        "stop_reason": reason,
-        "exit_code": exit_code if exit_code is not None else EXIT_CODES[status],
+        "status": str(ended.status),
+        "stop_reason": ended.reason,
+        "exit_code": ended.exit_code if ended.exit_code is not None else EXIT_CODES[ended.status],
         **summarise(rows, wall),
         "planned_trials": extra.get("planned_trials"),
         "run_id": run_id,
@@ -495,7 +584,7 @@ def run(
     except OSError as exc:
         summary["exit_code"] = EXIT_ENVIRONMENT
         summary["stop_reason"] += f"; summary.json not written: {exc.strerror or exc}"
-    return run_dir, summary
+    return summary
 
 
 def _judge(extra: dict, trials: int) -> tuple[RunStatus, str]:

@@ -37,41 +37,40 @@ joined with ``sfl worker`` stops when it goes away.
 from __future__ import annotations
 
 import itertools
-import json
 import logging
 import os
 import queue
 import shutil
-import socket
 import tempfile
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import zenoh
 
 from ..body import Body, Controller
-from ..events import (
-    Events,
-    ModuleAlive,
-    ModuleDied,
-    ModuleHung,
-    ModuleSilent,
-    ModuleStopped,
-    PlacementYielded,
-    Restarted,
-    WorkerJoined,
-    WorkerLeft,
-)
-from ..messages import Message, MessageError, NonFiniteError, SensorFrame, decode, encode
+from ..events import Events, ModuleAlive, ModuleDied, ModuleHung, ModuleSilent, Restarted, WorkerJoined, WorkerLeft
+from ..messages import Message, SensorFrame
 from ..protocols.service import Interrupted, Outcome, RunError
 from ..scenario.plan import Instance, Plan
 from ..status import EnvironmentProblem
-from . import bus, processes, ticklink
-from .liveness import NoProgressClock, ProgressBoard, cpu_sample
-from .placement import BUSY, CoreWatch, Pair, Placement, core_load, pin_process, place, usable_cpus
+from . import bus, processes
+from .inbox import (  # noqa: F401 - RETRYABLE: ``sfl_brain.runtime.RETRYABLE`` of before issue 30
+    RETRYABLE,
+    HungController,
+    Pending,
+    QueryEnded,
+    Replied,
+    TokenDeclared,
+    TokenGone,
+    Wake,
+    remote_fault,
+    send_request,
+)
+from .liveness import ProgressBoard
+from .pairs import UNIX_PATH_MAX, Pairs, initial_placement, lockstep_pairs  # noqa: F401 - as before issue 30
 from .processes import Child, Exited, kill_quietly, log_tail
-from .ticklink import WATCHED_WAIT, ControllerHung, LinkError
+from .ticklink import WATCHED_WAIT, ControllerHung, LinkError  # noqa: F401 - LinkError: as RETRYABLE
+from .watch import WATCH_PERIOD, HangWatch, watched_units  # noqa: F401 - watched_units: as before issue 30
 
 __all__ = ["RUN_TOKEN", "Interrupted", "RunError", "Supervisor", "hosted_spec", "kill_quietly", "log_tail"]
 
@@ -79,106 +78,6 @@ log = logging.getLogger("sfl.runtime")
 
 #: the instance name of the supervisor's own liveliness token
 RUN_TOKEN = "@run"
-
-#: the longest path of a Unix socket, with its final NUL (Linux 108, macOS 104: the shorter)
-UNIX_PATH_MAX = 104
-
-#: exception types a module host names in an error reply that mean "cut short, send it again"
-RETRYABLE = frozenset({LinkError.__name__, ControllerHung.__name__})
-
-#: s between two looks at the processes the run waits on (:mod:`.liveness`)
-WATCH_PERIOD = 0.5
-
-
-# ---------------------------------------------------------------- what arrives on the supervisor's queue
-@dataclass(frozen=True)
-class TokenDeclared:
-    """A liveliness token with a valid proof: ``nonce`` is the spawn it was made for."""
-
-    name: str
-    nonce: str
-
-
-@dataclass(frozen=True)
-class TokenGone:
-    name: str
-    nonce: str
-
-
-@dataclass(frozen=True)
-class Replied:
-    """A signed reply (or error reply) to request ``ticket``."""
-
-    ticket: int
-    outcome: Outcome
-
-
-@dataclass(frozen=True)
-class QueryEnded:
-    """Zenoh finished request ``ticket`` (after its replies, or at its time-out without one)."""
-
-    ticket: int
-
-
-@dataclass(frozen=True)
-class HungController:
-    """Body worker ``body`` found its controller process hung (:class:`~sfl_brain.runtime.ticklink.ControllerHung`)."""
-
-    body: str
-
-
-@dataclass(frozen=True)
-class Wake:
-    """Nothing happened: wakes the waiting thread to look at :meth:`Supervisor.raise_at_wait`'s request."""
-
-
-@dataclass
-class Pending:
-    target: str
-    message: Message
-    outcome: Outcome | None = None
-    done: bool = False
-    #: s its target may have the CPU without answering (``timeouts.request`` or ``timeouts.trial``)
-    limit: float = float("inf")
-
-
-def remote_fault(target: str, tag: str, text: str) -> RunError | Interrupted:
-    """The fault of an error reply ``text`` (``ExceptionType: detail``, as the host sends it)."""
-    fault = Interrupted if text.partition(":")[0] in RETRYABLE else RunError
-    return fault(f"`{target}` failed on `{tag}`: {text}")
-
-
-def lockstep_pairs(plan: Plan) -> tuple[list[Pair], list[str]]:
-    """The run's lockstep pairs (each body worker and its controller process, None when the controller
-    is colocated or there is none) and its other module processes (brain modules)."""
-    by_name = {i.name: i for i in plan.instances}
-    pairs = []
-    for body in plan.bodies:
-        controller = by_name[body].routes.get(SensorFrame.TAG)
-        pairs.append(Pair(body, controller if controller in by_name else None))
-    paired = {name for p in pairs for name in (p.body, p.controller)}
-    return pairs, [i.name for i in plan.instances if i.name not in paired]
-
-
-def watched_units(plan: Plan) -> dict[str, tuple[str, ...]]:
-    """The processes judged together (:mod:`.liveness`) by each process's name: a body worker and its
-    controller process take turns, so neither makes progress while the other holds it; every other process alone."""
-    pairs, others = lockstep_pairs(plan)
-    units: dict[str, tuple[str, ...]] = {name: (name,) for name in others}
-    for pair in pairs:
-        unit = (pair.body, pair.controller) if pair.controller is not None else (pair.body,)
-        for name in unit:
-            units[name] = unit
-    return units
-
-
-def initial_placement(plan: Plan) -> Placement:
-    """The run's placement (:func:`.placement.place`) on the cores it may use; with ``pin_cpus: auto`` and
-    a pair to place on more than one core, after measuring what other work keeps each core busy with."""
-    pairs, others = lockstep_pairs(plan)
-    mode, cpus = plan.scenario.lockstep.pin_cpus, usable_cpus()
-    measure = mode == "auto" and len(cpus) > 1 and any(p.controller is not None for p in pairs)
-    return place(pairs, others, cpus, mode, core_load(cpus) if measure else None)
 
 
 def hosted_spec(inst: Instance | None) -> dict | None:
@@ -188,7 +87,17 @@ def hosted_spec(inst: Instance | None) -> dict | None:
     return {"reference": inst.reference, "params": inst.params, "seed": inst.seed, "spec_name": inst.spec_name}
 
 
+def restartable(child: Child) -> bool:
+    """Its policy restarts it (``restart: on-failure``), and it holds no state between trials."""
+    inst = child.instance
+    return inst.restart == "on-failure" and issubclass(inst.cls, Body | Controller)
+
+
 class Supervisor:
+    """The run's module processes behind :class:`~sfl_brain.protocols.service.ModuleService`: started
+    (:meth:`start`), asked (:meth:`submit`, :meth:`wait_any`), watched and restarted while the protocol waits, and
+    stopped (:meth:`stop`). Where they run is :attr:`pairs`'s; who is hung, :attr:`watch`'s."""
+
     def __init__(
         self,
         plan: Plan,
@@ -223,38 +132,47 @@ class Supervisor:
         self._tickets = itertools.count()
         self.session: zenoh.Session | None = None
         self._liveliness = None
-        self.external_workers: list[str] = []
-        self._external_nonces: dict[str, str] = {}
+        #: workers joined from elsewhere (``sfl worker``), in the order they joined: the nonce of each's registration
+        self._external: dict[str, str] = {}
         #: a user's Zenoh configuration file (JSON5: TLS, ...), merged under ours for every session of the run
         self.zenoh_config = str(zenoh_config) if zenoh_config else None
         #: the run secret (never on a command line); ``secret_file`` holds it for ``sfl worker`` on this machine
         self.secret = secret or bus.new_secret()
         self.seal = bus.Seal(self.secret)
         self.secret_file: Path | None = None
+        self._drops = bus.Drops(log, "supervisor")
         #: what the supervisor dropped, by reason: forged or stale liveliness tokens and worker
         #: registrations, unsigned replies
-        self.dropped: dict[str, int] = {}
-        self._drops = bus.Drops(log, "supervisor")
-        self._drops.counts = self.dropped
+        self.dropped: dict[str, int] = self._drops.counts
         self._token = None
-        #: each body worker and its controller process on a core of their own, as lockstep.pin_cpus says
-        self.placement: Placement = initial_placement(plan)
-        #: what other work keeps the pairs' cores busy with while the run goes on (``auto``: the placement yields)
-        self._core_watch = CoreWatch(self.placement.usable) if self.placement.mode == "auto" else None
+        #: each body worker and its controller process on a core of their own and on their lockstep link
+        self.pairs = Pairs(plan, run_dir, self.events)
         #: the run's private folder (only this user may enter): the lockstep links' sockets, the progress board
         self.private: str | None = None
-        self.tick_folder: str | None = None
-        self.ticks: dict[str, dict[str, list[str]]] = {}
-        self._ticks_on = ""
-        #: what each module process got done (:mod:`.liveness`), and how the run judges them
+        #: what each module process got done (:mod:`.liveness`), and the look at those the run waits on
         self.board: ProgressBoard | None = None
-        self.units = watched_units(plan)
-        self._clocks: dict[tuple[str, ...], NoProgressClock] = {}
-        self._next_watch = 0.0
-        self._stopped: set[str] = set()  # processes the run waits on that were seen stopped (told once)
+        self.watch = HangWatch(plan, self.events)
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:
+        """Open the run's session, place the processes, start one per module and wait as long as they start."""
+        self._open_session()
+        (self.run_dir / "logs").mkdir(parents=True, exist_ok=True)
+        (self.run_dir / "rerun").mkdir(parents=True, exist_ok=True)
+        self.private = tempfile.mkdtemp(prefix="sfl-")  # 0700: only this user may connect, read or write
+        self.board = ProgressBoard(self.private, [inst.name for inst in self.plan.instances])
+        self.pairs.link(self.private)
+        self._declare_run()
+        for inst in self.plan.instances:
+            child = Child(inst, self.run_dir / "logs" / f"{inst.name}.log")
+            self.children[inst.name] = child
+            self._spawn(child)
+        while not all(c.alive for c in self.children.values()):  # as long as they start (the watch says)
+            self._handle(self._next_event(WATCH_PERIOD), starting=True)
+            self._watch(starting=True)
+
+    def _open_session(self) -> None:
+        """The run's Zenoh session, and its subscriber to the modules' liveliness tokens."""
         if self.endpoint is None:
             bus.check_listen(self.listen)  # a port in use: one clear line, not a Zenoh traceback
         try:
@@ -271,12 +189,11 @@ class Supervisor:
             zenoh.handlers.Callback(self._on_liveliness, indirect=False),
             history=True,
         )
-        (self.run_dir / "logs").mkdir(parents=True, exist_ok=True)
-        (self.run_dir / "rerun").mkdir(parents=True, exist_ok=True)
-        self.private = tempfile.mkdtemp(prefix="sfl-")  # 0700: only this user may connect, read or write
-        self.board = ProgressBoard(self.private, [inst.name for inst in self.plan.instances])
-        self._place()
-        if self.endpoint is None:  # others may join (sfl worker): the secret, readable by this user only
+
+    def _declare_run(self) -> None:
+        """The run's own liveliness token, and where others may join it (``sfl worker``) the secret, readable by this
+        user only."""
+        if self.endpoint is None:
             path = self.run_dir / "secret"
             fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
             with os.fdopen(fd, "w") as f:
@@ -284,16 +201,9 @@ class Supervisor:
             self.secret_file = path
         run_proof = self.seal.alive_proof(self.run_id, RUN_TOKEN, os.urandom(8).hex())
         self._token = self.session.liveliness().declare_token(bus.alive_key(self.run_id, RUN_TOKEN, run_proof))
-        for inst in self.plan.instances:
-            child = Child(inst, self.run_dir / "logs" / f"{inst.name}.log")
-            self.children[inst.name] = child
-            self._spawn(child)
-        while not all(c.alive for c in self.children.values()):  # as long as they start (the watch says)
-            self._handle(self._next_event(WATCH_PERIOD), starting=True)
-            self._watch(starting=True)
 
     def spec_for(self, inst: Instance) -> dict:
-        colocated = inst.colocated
+        """What the host of ``inst`` reads on its stdin: the module, its links, its place, the run's secret."""
         spec = {
             "run_id": self.run_id,
             "instance": inst.name,
@@ -313,9 +223,9 @@ class Supervisor:
             "lease_ms": bus.LOCAL_LEASE_MS,
             "progress": self._progress_spec(inst),
             "spin": self.plan.scenario.lockstep.spin_us * 1e-6,
-            "colocated": hosted_spec(colocated),
-            "cpus": self.placement.of(inst.name),
-            "tick": self.ticks.get(inst.name),
+            "colocated": hosted_spec(inst.colocated),
+            "cpus": self.pairs.placement.of(inst.name),
+            "tick": self.pairs.ticks.get(inst.name),
             "run_dir": str(self.run_dir),
             "secret": self.secret,
             "zenoh_config": self.zenoh_config,
@@ -332,46 +242,6 @@ class Supervisor:
             spec["controller"] = self.board.slots[controller]
         return spec
 
-    def _place(self) -> None:
-        """Give each body worker and its controller process their lockstep link, and say where
-        every process runs: ``logs/placement.json`` and one line on the terminal."""
-        pairs, _ = lockstep_pairs(self.plan)
-        pairs = [p for p in pairs if p.controller is not None]
-        links = "the mesh (no Unix sockets here)"
-        if pairs and hasattr(socket, "AF_UNIX") and os.name != "nt":  # Zenoh has no unixsock-stream on Windows
-            self.tick_folder = self.private
-            if len(os.fsencode(self.tick_folder)) + len(f"/{len(pairs)}.sock") < UNIX_PATH_MAX:
-                on_socket = self.plan.scenario.lockstep.link == "socket" and ticklink.available()
-                endpoint_of = ticklink.endpoint if on_socket else bus.tick_endpoint
-                for i, pair in enumerate(pairs):
-                    endpoint = endpoint_of(self.tick_folder, str(i))
-                    self.ticks[pair.controller] = {"listen": [endpoint]}
-                    self.ticks[pair.body] = {"connect": [endpoint]}
-                kind = "Unix sockets" if on_socket else "Zenoh lowlatency sessions"
-                if self.plan.scenario.lockstep.link == "socket" and not on_socket:
-                    kind += " (lockstep.link: socket needs SOCK_SEQPACKET Unix sockets, which this OS lacks)"
-                links = f"lockstep links ({kind}) in {self.tick_folder}"
-            else:
-                links = f"the mesh (the temporary folder {self.tick_folder} is too long a path for a Unix socket)"
-        self._ticks_on = links
-        self._write_placement()
-        log.info("%s; ticks on %s", self.placement.describe(), links)
-        if pairs:
-            print(f"sfl: {self.placement.describe()}", flush=True)
-
-    def _write_placement(self) -> None:
-        """``logs/placement.json``: where each process runs now, and each placement before it (``earlier``)."""
-        path = self.run_dir / "logs" / "placement.json"
-        earlier = []
-        if path.exists():
-            try:
-                old = json.loads(path.read_text())
-                earlier = old.pop("earlier", []) + [{k: old[k] for k in ("cores", "reason", "load") if k in old}]
-            except (OSError, ValueError):
-                earlier = []
-        placed = self.placement.to_json() | {"lockstep_links": self.ticks, "ticks_on": self._ticks_on}
-        path.write_text(json.dumps(placed | ({"earlier": earlier} if earlier else {}), indent=1) + "\n")
-
     def listen_for_children(self) -> list[str]:
         host = "127.0.0.1"
         for ep in self.listen:
@@ -384,15 +254,6 @@ class Supervisor:
         spec = self.spec_for(child.instance)
         spec["nonce"] = child.nonce
         processes.start(child, spec, self._inbox.put)
-
-    def _on_liveliness(self, sample: zenoh.Sample) -> None:
-        name, proof = bus.parse_alive_key(sample.key_expr)
-        nonce = self.seal.check_alive(self.run_id, name, proof)
-        if nonce is None:  # no proof, or a forged one
-            self._drops("unauthenticated", "liveliness token", str(sample.key_expr))
-            return
-        kind = TokenDeclared if sample.kind == zenoh.SampleKind.PUT else TokenGone
-        self._inbox.put(kind(name, nonce))
 
     def stop(self, grace: float = 3.0) -> None:
         """Stop every child: SIGTERM, then SIGKILL after ``grace`` seconds; close the session."""
@@ -411,7 +272,7 @@ class Supervisor:
             self.board = None
         if self.private is not None:
             shutil.rmtree(self.private, ignore_errors=True)
-            self.private = self.tick_folder = None
+            self.private = None
         if self.session is not None:
             self.session.close()
             self.session = None
@@ -451,21 +312,24 @@ class Supervisor:
             case Exited(name, exit_code, generation):
                 self._exited(name, exit_code, generation, starting)
             case HungController(body):
-                controller = self.children[body].instance.routes.get(SensorFrame.TAG) if body in self.children else None
-                if controller in self.children:
+                controller = self._controller_of(body)
+                if controller is not None:
                     limit = self.plan.scenario.timeouts.tick
-                    hung = ModuleHung(controller, limit, "timeouts.tick", limit, "answering a tick (its body says)")
-                    self._end_hung(controller, hung)
+                    hung = ModuleHung(
+                        controller.name, limit, "timeouts.tick", limit, "answering a tick (its body says)"
+                    )
+                    self._end_hung(controller.name, hung)
+
+    def _controller_of(self, body: str) -> Child | None:
+        """The process of body worker ``body``'s controller; None when the controller is colocated or there is none."""
+        child = self.children.get(body)
+        return None if child is None else self.children.get(child.instance.routes.get(SensorFrame.TAG, ""))
 
     def _controller_exiting(self, body: str) -> None:
         """A body worker's trial was cut short: if its controller process is dying (the body saw its link close while
         the process still tears down), it is no longer alive, so that the trial waits for its restart instead of
         going back to it (its exit, handled next, restarts it)."""
-        controller = (
-            self.children.get(self.children[body].instance.routes.get(SensorFrame.TAG, ""))
-            if (body in self.children)
-            else None
-        )
+        controller = self._controller_of(body)
         if controller is not None and controller.alive and controller.proc is not None:
             if processes.exits_soon(controller.proc, grace=0.2):
                 controller.alive = False
@@ -477,7 +341,7 @@ class Supervisor:
         child = self.children.get(pending.target)
         if child is not None and child.proc is not None and processes.exits_soon(child.proc):
             return  # it died mid-request: its Exited decides (interrupt and restart, or fail)
-        if child is None and pending.target in self.external_workers:
+        if child is None and pending.target in self._external:
             pending.outcome = Interrupted(f"worker `{pending.target}` did not answer")
         elif pending.target in self.plan.bodies:
             # a body worker that is alive but whose trial got no reply (its link to us dropped
@@ -486,6 +350,16 @@ class Supervisor:
         else:
             pending.outcome = RunError(f"no reply from `{pending.target}` to `{pending.message.TAG}`")
         pending.done = True
+
+    # ------------------------------------------------------------------ who is there (liveliness tokens)
+    def _on_liveliness(self, sample: zenoh.Sample) -> None:
+        name, proof = bus.parse_alive_key(sample.key_expr)
+        nonce = self.seal.check_alive(self.run_id, name, proof)
+        if nonce is None:  # no proof, or a forged one
+            self._drops("unauthenticated", "liveliness token", str(sample.key_expr))
+            return
+        kind = TokenDeclared if sample.kind == zenoh.SampleKind.PUT else TokenGone
+        self._inbox.put(kind(name, nonce))
 
     def _token_declared(self, name: str, nonce: str) -> None:
         if name == RUN_TOKEN:
@@ -499,12 +373,11 @@ class Supervisor:
             self.events.publish(ModuleAlive(name))
         elif not name.startswith(self.plan.body_spec + "."):
             self._drops("foreign", "liveliness token", f"{name} is no module of this run")
-        elif name in self.external_workers:
-            if nonce != self._external_nonces.get(name):
+        elif name in self._external:
+            if nonce != self._external[name]:
                 self._drops("stale", "worker registration", f"{name} is already registered")
         else:
-            self.external_workers.append(name)  # a worker joined from elsewhere (sfl worker)
-            self._external_nonces[name] = nonce
+            self._external[name] = nonce  # a worker joined from elsewhere (sfl worker)
             self.events.publish(WorkerJoined(name))
 
     def _token_gone(self, name: str, nonce: str) -> None:
@@ -512,9 +385,8 @@ class Supervisor:
             return
         child = self.children.get(name)
         if child is None:
-            if name in self.external_workers and nonce == self._external_nonces.get(name):
-                self.external_workers.remove(name)
-                del self._external_nonces[name]
+            if nonce == self._external.get(name):
+                del self._external[name]
                 self._interrupt(name, f"worker `{name}` left")
                 self.events.publish(WorkerLeft(name))
             return
@@ -524,6 +396,7 @@ class Supervisor:
         if child.proc is not None and child.proc.poll() is None:  # it runs: waited for, judged by its progress
             self.events.publish(ModuleSilent(name))
 
+    # ------------------------------------------------------------------ faults: restart, interrupt, fail
     def _exited(self, name: str, exit_code: int, generation: int, starting: bool) -> None:
         child = self.children.get(name)
         if child is None or child.stopping or generation != child.generation:
@@ -532,7 +405,7 @@ class Supervisor:
         cause, child.hung = child.hung, ""
         self._interrupt(name, f"module `{name}` {cause + ': killed' if cause else f'exited with code {exit_code}'}")
         inst = child.instance
-        if self._restartable(child) and child.restarts < inst.max_restarts:
+        if restartable(child) and child.restarts < inst.max_restarts:
             child.restarts += 1
             self.events.publish(Restarted(name, exit_code, child.restarts, inst.max_restarts, cause))
             self._spawn(child)
@@ -543,101 +416,17 @@ class Supervisor:
         self.events.publish(died)
         raise RunError(died.describe())
 
-    @staticmethod
-    def _restartable(child: Child) -> bool:
-        """Its policy restarts it (``restart: on-failure``), and it holds no state between trials."""
-        inst = child.instance
-        return inst.restart == "on-failure" and issubclass(inst.cls, Body | Controller)
-
-    # ------------------------------------------------------------------ liveness by progress
     def _watch(self, starting: bool = False) -> None:
-        """Every :data:`WATCH_PERIOD` s: look at each group of processes the run waits on (:meth:`_waited_on`) and
-        end those that had the CPU past their time without progress (:mod:`.liveness`)."""
-        now = time.monotonic()
-        if now < self._next_watch or self.board is None:
-            return
-        self._next_watch = now + WATCH_PERIOD
-        waited = self._waited_on()
-        for unit in [u for u in self._clocks if u not in waited]:
-            del self._clocks[unit]
-        for unit, (limit, key, doing, tickets) in waited.items():
-            procs = [self.children[name].proc for name in unit]
-            samples = [cpu_sample(proc.pid) if proc is not None else None for proc in procs]
-            self._tell_stopped(unit, samples)
-            marks = (tuple(self.board.read(name)[1] for name in unit), tickets)
-            clock = self._clocks.setdefault(unit, NoProgressClock())
-            had = clock.update(samples, marks)
-            if had <= limit:
-                continue
-            used = clock.used()
-            spinning = [name for name, cpu in zip(unit, used, strict=True) if cpu > 0.25 * had]
-            clock.reset()
-            for name in spinning or unit:
-                hung = ModuleHung(name, had, key, limit, doing)
-                if starting and not self._restartable(self.children[name]):
-                    self.events.publish(hung)
-                    child = self.children[name]
-                    raise RunError(
-                        f"modules not ready: {hung.describe()}; its log ({child.log_path}):\n{log_tail(child.log_path)}"
-                    )
-                self._end_hung(name, hung)
-
-    def _tell_stopped(self, unit: tuple[str, ...], samples: list) -> None:
-        """Say once when a process the run waits on is stopped, and when it runs again."""
-        for name, sample in zip(unit, samples, strict=True):
-            stopped = sample is not None and sample.state in "Tt"
-            if stopped != (name in self._stopped):
-                (self._stopped.add if stopped else self._stopped.discard)(name)
-                self.events.publish(ModuleStopped(name, stopped))
-
-    def _yield_cores(self) -> None:
-        """``pin_cpus: auto``: every :data:`.placement.RECHECK_S` s, what other work keeps each core busy
-        with (the cores' busy time less this run's pinned processes'); a pair's core busier than
-        :data:`.placement.BUSY` makes the placement yield: placed again on the load now (the pair moves to a
-        quiet core, or nothing stays pinned), every process moved, and the user told."""
-        watch = self._core_watch
-        if watch is None or not self.placement.cores or not watch.due():
-            return
-        used: dict[int, float] = {}
-        for name, cores in self.placement.cores.items():
-            child = self.children.get(name)
-            sample = cpu_sample(child.proc.pid) if child is not None and child.proc is not None else None
-            if sample is not None and len(cores) == 1:
-                used[cores[0]] = used.get(cores[0], 0.0) + sample.cpu
-        load = watch.sample(used)
-        pairs, others = lockstep_pairs(self.plan)
-        paired = {n for p in pairs if p.controller is not None for n in (p.body, p.controller)}
-        pair_cores = {c for name, cores in self.placement.cores.items() if name in paired for c in cores}
-        trapped = sorted(c for c in pair_cores if load is not None and load.get(c, 0.0) > BUSY)
-        if not trapped:
-            return
-        before = self.placement
-        self.placement = place(pairs, others, list(before.usable), before.mode, load)
-        for name, child in self.children.items():
-            if child.proc is not None and before.of(name) != self.placement.of(name):
-                pin_process(child.proc.pid, self.placement.of(name) or before.usable)
-        busy = ", ".join(f"core {c} {load[c]:.0%}" for c in trapped)
-        self.events.publish(PlacementYielded(busy, self.placement.describe()))
-        self._write_placement()
-
-    def _waited_on(self) -> dict[tuple[str, ...], tuple[float, str, str, tuple[int, ...]]]:
-        """The groups of processes (:func:`watched_units`) the run waits on now, each with its time (s of CPU without
-        progress), that time's scenario key, what it is doing, and the requests it works on: those with a request in
-        flight (a brain module: ``timeouts.request``; a body worker and its controller: ``timeouts.trial``), and each
-        process that is starting (``timeouts.ready``)."""
-        timeouts = self.plan.scenario.timeouts
-        waited: dict[tuple[str, ...], tuple[float, str, str, tuple[int, ...]]] = {}
-        for ticket, pending in self.pending.items():
-            if pending.done or pending.target not in self.children:
-                continue
-            unit = self.units[pending.target]
-            key = "timeouts.trial" if pending.target in self.plan.bodies else "timeouts.request"
-            tickets = waited.get(unit, (0, "", "", ()))[3] + (ticket,)
-            waited[unit] = (pending.limit, key, f"answering `{pending.message.TAG}`", tickets)
-        for child in self.children.values():
-            if not child.alive and not child.stopping and child.proc is not None and child.proc.poll() is None:
-                waited.setdefault((child.name,), (timeouts.ready, "timeouts.ready", "coming alive", ()))
-        return waited
+        """End the processes the run waits on that had the CPU past their time without progress (:mod:`.watch`);
+        while they start, one that no policy restarts fails the run."""
+        for name, hung in self.watch.hung(self.board, self.children, self.pending):
+            child = self.children[name]
+            if starting and not restartable(child):
+                self.events.publish(hung)
+                raise RunError(
+                    f"modules not ready: {hung.describe()}; its log ({child.log_path}):\n{log_tail(child.log_path)}"
+                )
+            self._end_hung(name, hung)
 
     def _end_hung(self, name: str, hung: ModuleHung) -> None:
         """A hung process: a brain module fails the run (its learnt state is never thrown away); a body worker or
@@ -655,7 +444,7 @@ class Supervisor:
         affected = {name}
         # a body's trial is lost when its controller dies (every module routes to the controller: only bodies drive it)
         for body in self.plan.bodies:
-            if self.children[body].instance.routes.get("controller.sensors") == name:
+            if self.children[body].instance.routes.get(SensorFrame.TAG) == name:
                 affected.add(body)
         for pending in self.pending.values():
             if not pending.done and pending.target in affected:
@@ -668,39 +457,8 @@ class Supervisor:
         another machine has ``timeout`` s of wall time."""
         ticket = next(self._tickets)
         self.pending[ticket] = Pending(target, message, limit=timeout)
-        own = target in self.children
-        wait = WATCHED_WAIT if own else timeout
-        inbox, seal, drops = self._inbox, self.seal, self._drops
-        key_expr = bus.key(self.run_id, target, message.TAG)
-        nonce, payload = seal.seal_request(key_expr, encode(message))
-
-        def on_reply(reply: zenoh.Reply) -> None:
-            if reply.ok is not None:
-                data = seal.open_reply(nonce, reply.ok.payload.to_bytes())
-                if data is None:
-                    drops("unauthenticated", "reply", f"to `{message.TAG}` on {key_expr}")
-                    return
-                try:
-                    inbox.put(Replied(ticket, decode(data)))
-                except (MessageError, NonFiniteError) as exc:
-                    inbox.put(Replied(ticket, RunError(f"malformed reply from `{target}`: {exc}")))
-            else:
-                data = seal.open_reply(nonce, reply.err.payload.to_bytes())
-                if data is None:  # Zenoh's own "Timeout" (QueryEnded decides), or a stranger's
-                    return
-                text = data.decode(errors="replace")
-                if text.partition(":")[0] == ControllerHung.__name__:
-                    inbox.put(HungController(target))
-                inbox.put(Replied(ticket, remote_fault(target, message.TAG, text)))
-
-        self.session.get(
-            key_expr,
-            zenoh.handlers.Callback(on_reply, lambda: inbox.put(QueryEnded(ticket)), indirect=False),
-            payload=payload,
-            timeout=wait,
-            target=zenoh.QueryTarget.ALL,
-            consolidation=zenoh.ConsolidationMode.NONE,  # every reply as it comes: a stranger's cannot hold ours
-        )
+        wait = WATCHED_WAIT if target in self.children else timeout
+        send_request(self.session, self.seal, self._drops, self._inbox.put, self.run_id, ticket, target, message, wait)
         return ticket
 
     def wait_any(self, tickets: list[int], timeout: float | None = None) -> list[tuple[int, Outcome]]:
@@ -717,7 +475,7 @@ class Supervisor:
                 return []
             self._handle(self._next_event(WATCH_PERIOD if remaining is None else min(WATCH_PERIOD, remaining)))
             self._watch()
-            self._yield_cores()
+            self.pairs.yield_cores(self.children)
 
     def workers(self) -> list[str]:
         """Body workers that can run a trial now (launched and joined from elsewhere): alive, and
@@ -725,12 +483,13 @@ class Supervisor:
         as the replacement is up (not after a tick time-out)."""
         own = []
         for name in self.plan.bodies:
-            child = self.children[name]
-            controller = self.children.get(child.instance.routes.get("controller.sensors", ""))
+            controller = self._controller_of(name)
             # running: a controller that has just died may not be handled yet (its body saw its link close first)
-            if child.alive and (controller is None or (controller.alive and processes.running(controller.proc))):
+            if self.children[name].alive and (
+                controller is None or (controller.alive and processes.running(controller.proc))
+            ):
                 own.append(name)
-        return own + list(self.external_workers)
+        return own + list(self._external)
 
     def wait_for_workers(self, timeout: float) -> None:
         """Handle what arrives within ``timeout`` s (one event): a module coming back, a worker joining."""
@@ -740,11 +499,7 @@ class Supervisor:
     def coming(self) -> bool:
         """A body worker or controller process of this run is starting (a restart): it will be a worker soon, or be
         found hung (``timeouts.ready``)."""
-        return any(
-            not c.alive and not c.stopping and c.proc is not None and c.proc.poll() is None
-            for c in self.children.values()
-            if issubclass(c.instance.cls, Body | Controller)
-        )
+        return any(c.starting for c in self.children.values() if issubclass(c.instance.cls, Body | Controller))
 
     def pids(self) -> list[int]:
         return [c.proc.pid for c in self.children.values() if c.proc is not None]

@@ -427,12 +427,16 @@ class TickLink:
         body: str,
         controller: str,
         timeout: float,
-        spin: float,
-        secret: str | None,
-        drops: bus.Drops | None,
+        spin: float = 0.0,
+        *,
+        secret: str | None = None,
+        drops: bus.Drops | None = None,
         controller_pid: Callable[[], int] | None = None,
         progress: Callable[[], None] | None = None,
+        **transport,
     ) -> None:
+        """``transport``: what the subclass's :meth:`_open` takes (``ticks=`` for :class:`BusLink`,
+        ``endpoint=`` for :class:`SocketLink`)."""
         self.session = session
         self.run_id = run_id
         self.controller = controller
@@ -451,9 +455,12 @@ class TickLink:
         self._abort_as: type[LinkError] = LinkError
         self._stopping = False
         self._closed = threading.Event()
-
-    def _start_watchdog(self) -> None:
+        self._open(body, **transport)
         threading.Thread(target=self._watch, name="ticklink-watchdog", daemon=True).start()
+
+    def _open(self, body: str) -> None:
+        """Open the body's end of the link to the controller (``body``: its instance name)."""
+        raise NotImplementedError
 
     def _wake(self, reason: str) -> None:
         """End the waiting tick (or reset) with :meth:`_fault` (``reason`` with ``{what}`` filled in)."""
@@ -590,23 +597,10 @@ class BusLink(TickLink):
     and counted in ``drops``.
     """
 
-    def __init__(
-        self,
-        session: zenoh.Session,
-        run_id: str,
-        body: str,
-        controller: str,
-        timeout: float,
-        spin: float = 0.0,
-        *,
-        secret: str | None = None,
-        drops: bus.Drops | None = None,
-        ticks: zenoh.Session | None = None,
-        controller_pid: Callable[[], int] | None = None,
-        progress: Callable[[], None] | None = None,
-    ) -> None:
-        super().__init__(session, run_id, body, controller, timeout, spin, secret, drops, controller_pid, progress)
-        self.ticks = ticks or session
+    def _open(self, body: str, ticks: zenoh.Session | None = None) -> None:
+        """Publish frames and take commands on ``ticks`` (None: the mesh), and follow the controller's liveliness."""
+        run_id, controller = self.run_id, self.controller
+        self.ticks = ticks or self.session
         self.command_key = bus.key(run_id, body, MotorCommand.TAG)
         self.publisher = self.ticks.declare_publisher(bus.key(run_id, controller, SensorFrame.TAG))
         self.subscriber = self.ticks.declare_subscriber(self.command_key, zenoh.handlers.RingChannel(64))
@@ -617,11 +611,10 @@ class BusLink(TickLink):
         )
         if self.publisher.matching_status.matching:
             self._linked.set()
-        self._start_watchdog()
         # the controller's signed liveliness tokens: when the one we saw goes away, it died
         self._controller_tokens: set[str] = set()
-        self._liveliness = session.liveliness().declare_subscriber(
-            bus.alive_key(run_id, controller, "*") if secret else bus.alive_key(run_id, controller),
+        self._liveliness = self.session.liveliness().declare_subscriber(
+            bus.alive_key(run_id, controller, "*") if self.seal.secret else bus.alive_key(run_id, controller),
             zenoh.handlers.Callback(self._on_controller_token, indirect=False),
             history=True,
         )
@@ -708,24 +701,9 @@ class SocketLink(TickLink):
     the watchdog ends an overdue one. Either closes the link, and the next trial connects again (to a
     restarted controller: within ``timeout``)."""
 
-    def __init__(
-        self,
-        session: zenoh.Session,
-        run_id: str,
-        body: str,
-        controller: str,
-        timeout: float,
-        spin: float = 0.0,
-        *,
-        endpoint: str,
-        secret: str | None = None,
-        drops: bus.Drops | None = None,
-        controller_pid: Callable[[], int] | None = None,
-        progress: Callable[[], None] | None = None,
-    ) -> None:
-        super().__init__(session, run_id, body, controller, timeout, spin, secret, drops, controller_pid, progress)
+    def _open(self, body: str, endpoint: str) -> None:
+        """The body's end of the pair's socket (it connects at the first reset)."""
         self.channel = Channel(endpoint)
-        self._start_watchdog()
 
     def _wake(self, reason: str) -> None:
         self._abort = reason
