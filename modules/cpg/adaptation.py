@@ -89,3 +89,39 @@ class AnkleCentres:
             np.clip(change, -step, step, out=change)
         self.centre += change
         return change
+
+
+class AnkleAdaptation:
+    """``CPGNetwork``'s ankle adaptation (``AnkleCentres`` above): switching it per trial, and reading it."""
+
+    def set_ankle_adaptation(self, on: bool) -> None:
+        """The ankles' centres follow the sensed slope this trial (``ankle_adaptation``; ``reset`` restores the
+        circuit's ``enabled``)."""
+        if on and self._ankles is None:
+            raise ValueError(f"ankle_adaptation: circuit {self.circuit.name} has none (circuit key `ankle_adaptation`)")
+        self.ankle_adaptation = bool(on)
+
+    @property
+    def slope_estimate(self) -> np.ndarray:
+        """Each adapted foot's slope estimate, rad, + = uphill, (feet,) or (batch, feet); zeros before the first tick
+        or without an adaptation (issue 29)."""
+        out = self.slope_estimate_all()
+        return out if self.batched else out[0]
+
+    def slope_estimate_all(self) -> np.ndarray:
+        """``slope_estimate`` with the batch axis always."""
+        a = self._ankles
+        if a is None:
+            return np.zeros((self.batch, 0))
+        return a.estimate.copy() if a.estimate is not None else np.zeros((self.batch, len(a.joints)))
+
+    @property
+    def ankle_centre(self) -> np.ndarray:
+        """Each adapted ankle's centre shift (added to its theta_0), rad, (feet,) or (batch, feet)."""
+        out = self.ankle_centre_all()
+        return out if self.batched else out[0]
+
+    def ankle_centre_all(self) -> np.ndarray:
+        """``ankle_centre`` with the batch axis always."""
+        a = self._ankles
+        return a.centre.copy() if a is not None else np.zeros((self.batch, 0))

@@ -70,9 +70,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .adaptation import AnkleCentres
+from .adaptation import AnkleAdaptation, AnkleCentres
 from .circuit import Circuit
 from .equations import (  # noqa: F401 - the cell equations, importable from here as before
+    E,
+    F,
     _logistic,
     averaged_input,
     fast_current,
@@ -83,21 +85,25 @@ from .equations import (  # noqa: F401 - the cell equations, importable from her
     sigmoid,
     slow_steady_state,
 )
-from .events import PhaseResetEvent, ResetTrigger, SwitchEvent
-from .terrain import DETECTORS, TerrainSwitch, TerrainSwitchEvent, TerrainThreshold, Watch, Watcher, make_detector
+from .events import PhaseResetEvent, ResetTrigger, SwitchEvent  # noqa: F401 - importable from here as before
+from .gains import GainGroups
+from .phase_reset import PhaseResetting
+from .posture import Posture
+from .switching import PatternSwitching
+from .terrain import TerrainSwitch, TerrainSwitchEvent, TerrainSwitching, TerrainThreshold, Watcher
+from .trial_start import TrialStart
 
 #: ``np.dot``'s C function without its ``__array_function__`` dispatch (a Python call per use, about 0.3 us: 50 uses per
 #: control tick on the hot path); the same function, so the same numbers, bit for bit (tests/test_humanoid_speed.py)
 _dot = getattr(np.dot, "_implementation", np.dot)
 
-E, F = 0, 1  # side index: neuron 2 j + E is joint j's extensor chain, 2 j + F its flexor chain
 TARGETS = ("PF_E", "PF_F", "MN_E", "MN_F")
 
 
 # The cell equations are in equations.py; the events and the reset trigger in events.py.
 
 
-class CPGNetwork:
+class CPGNetwork(TrialStart, GainGroups, PhaseResetting, PatternSwitching, TerrainSwitching, AnkleAdaptation, Posture):
     """A circuit's MLMP-CPG, ``batch`` independent copies of it integrated together.
 
     ``batch=None`` (the default) is one network whose accessors return arrays without the batch axis.
@@ -332,194 +338,6 @@ class CPGNetwork:
         self.sigma_out[:, cols] = self.sigma_s[:, cols]
         self._update_coefficients()
 
-    def set_gain_multiplier(self, group: str, value) -> None:
-        """Ch. 5's learnt MN gain of a group (w1 pitch, w2 roll, L1631): every joint of ``gain_groups[group]`` gets its
-        circuit gain times ``value`` (one number or one per batch copy; 1 = the calibrated gait) until ``reset``.
-
-        A position command scales the motor neurons' drive about its value at rest: theta_cmd = theta_0 + G D_rest +
-        value G (D - D_rest), D = MN_E - MN_F, D_rest = D with every RG at rest on the trial's first frame (the
-        reflexes' offset; ``_drive_at_rest``). So the command at rest is the calibrated one (the circuit's theta_0 is
-        calibrated so that it is the standing pose) whatever the multiplier, and the multiplier scales the oscillation
-        only, as G does in the author's code, whose reflexes are off (D_rest = 0, digest §5). Literally (theta_0 +
-        value G D) it would also move every joint's resting angle by (value - 1) G D_rest: the knees by 0.5 rad at
-        1.5, and 0 would collapse the robot instead of standing it. A voltage command is scaled as it is."""
-        if group not in self.gain_groups:
-            raise ValueError(
-                f"gain_{group}: expected a gain group of circuit {self.circuit.name} (gain_groups "
-                f"{list(self.gain_groups)}); it has no {group!r}"
-            )
-        values = np.broadcast_to(np.asarray(value, dtype=float), (self.batch,))
-        self._set_gains(group, values, np.arange(self.batch))
-
-    def _set_gains(self, group: str, values: np.ndarray, rows: np.ndarray) -> None:
-        """The group's multipliers of the copies ``rows`` := ``values`` (one per such copy), and their gains."""
-        cols = self.gain_groups[group]
-        cells = np.ix_(rows, cols)
-        gain = values[:, None] * self._circuit_gain[cols]
-        if self._rest_drive is not None:  # mid-trial: the drive at rest keeps its command (see set_gain_multiplier)
-            self.theta0[cells] += (self._gain[cells] - gain) * self._rest_drive[cells]
-        self.gain_multipliers[group][rows] = values
-        self._gain[cells] = gain
-
-    @property
-    def gain(self) -> np.ndarray:
-        """G per joint (M of (3.6) or G of theta_0 + G (MN_E - MN_F)) after the group multipliers, (joints,) or (batch,
-        joints)."""
-        return self._gain if self.batched else self._gain[0]
-
-    def set_posture_gain(self, gain: float) -> None:
-        """The posture term's gain, 1/s, until ``reset`` (which restores the circuit's); 0 = off (L1764, §7.18)."""
-        if self.circuit.posture is None:
-            raise ValueError(f"posture_gain: circuit {self.circuit.name} has no posture (circuit key `posture`)")
-        if not (np.isfinite(gain) and gain >= 0):
-            raise ValueError(f"posture_gain: expected a gain in 1/s >= 0; got {gain!r}")
-        self.posture_gain = float(gain)
-        self._update_sensor_thresholds()
-
-    def _update_sensor_thresholds(self) -> None:
-        """The sensory neurons' thresholds (4.13): the file's, those of ``posture.relative_sensors`` moved by the
-        posture's target while the posture term is on (a fall from the held lean, issue 29)."""
-        self._sensor_theta = self._sensor_theta_file.copy()
-        if self.posture_gain and len(self._relative_sensors):
-            self._sensor_theta[self._relative_sensors] += self.circuit.posture.target
-
-    def set_ankle_adaptation(self, on: bool) -> None:
-        """The ankles' centres follow the sensed slope this trial (``ankle_adaptation``; ``reset`` restores the
-        circuit's ``enabled``)."""
-        if on and self._ankles is None:
-            raise ValueError(f"ankle_adaptation: circuit {self.circuit.name} has none (circuit key `ankle_adaptation`)")
-        self.ankle_adaptation = bool(on)
-
-    def set_start_ramp(self, seconds: float) -> None:
-        """alpha_MLR grows from 0 over this trial's first ``seconds`` (0: at once); before its first tick."""
-        if not (np.isfinite(seconds) and seconds >= 0):
-            raise ValueError(f"start_ramp: expected a time in s >= 0; got {seconds!r}")
-        if self.tick:
-            raise ValueError("start_ramp: set it before the trial's first tick")
-        self.start_ramp = float(seconds)
-        self._ramp_share = 0.0 if self.start_ramp > 0 else 1.0
-        self._update_pattern_formation()
-
-    @property
-    def slope_estimate(self) -> np.ndarray:
-        """Each adapted foot's slope estimate, rad, + = uphill, (feet,) or (batch, feet); zeros before the first tick
-        or without an adaptation (issue 29)."""
-        out = self.slope_estimate_all()
-        return out if self.batched else out[0]
-
-    def slope_estimate_all(self) -> np.ndarray:
-        """``slope_estimate`` with the batch axis always."""
-        a = self._ankles
-        if a is None:
-            return np.zeros((self.batch, 0))
-        return a.estimate.copy() if a.estimate is not None else np.zeros((self.batch, len(a.joints)))
-
-    @property
-    def ankle_centre(self) -> np.ndarray:
-        """Each adapted ankle's centre shift (added to its theta_0), rad, (feet,) or (batch, feet)."""
-        out = self.ankle_centre_all()
-        return out if self.batched else out[0]
-
-    def ankle_centre_all(self) -> np.ndarray:
-        """``ankle_centre`` with the batch axis always."""
-        a = self._ankles
-        return a.centre.copy() if a is not None else np.zeros((self.batch, 0))
-
-    @property
-    def posture_shift(self) -> np.ndarray:
-        """The posture term's accumulated shift of its joints' theta_0, rad, in ``posture.joints`` order ((batch, n)
-        when batched); empty without a posture."""
-        return self._posture_shift.copy() if self.batched else self._posture_shift[0].copy()
-
-    #: what ``arm_terrain_switch`` takes
-    TERRAIN_SWITCH_MODES = ("at_once", "gradual")
-    TERRAIN_SWITCH_WHEN = ("above", "below", "outside")
-
-    def arm_terrain_switch(
-        self,
-        input: str,
-        threshold: float | None,
-        when: str,
-        mode: str = "at_once",
-        seconds: float = 0.0,
-        after: float = 0.0,
-        gains: dict[str, float] | None = None,
-        sigma_s: float | None = None,
-        sigma_joints: list[str] | None = None,
-        band: tuple[float, float] | None = None,
-        theta_mlr: float | None = None,
-        detector: str = "torso",
-    ) -> None:
-        """Switch parameters once this trial when the terrain changes (§5.8, L1759-1766): from ``after`` s on, the first
-        tick whose ``input`` (e.g. the torso pitch, rad) is at or ``when`` ("above", "below") ``threshold`` starts
-        moving the group gain multipliers ``gains`` (group -> new value) and the RG's sigma_s of ``sigma_joints``
-        (default all; None: unchanged) from their values at that tick to the new ones: ``mode`` "at_once" in that
-        tick, "gradual" linearly over ``seconds`` (the thesis's "switching occurs gradually", L1766). Per batch copy.
-        ``band`` = (k, seconds) instead of a ``threshold``: the threshold is measured on the walk itself, the input's
-        mean +- k x its half range (- below, + above, either for "outside") over ``seconds`` from ``after`` (digest
-        §7.17's rule, "defined with taking into account the oscillation range of the torso", L1759), and detection
-        starts once it is known.
-        ``theta_mlr`` (None: unchanged) moves the descending theta_MLR (4.9) of ``sigma_joints`` the same way.
-        ``detector`` (terrain.py ``DETECTORS``): what is watched, ``input`` itself ("torso", the thesis's) or another
-        sensed signal (issue 29), whose band is measured the same way; "time" fires at ``after``.
-        ``reset`` disarms it; the switches are in ``terrain_switch_events``."""
-        if input not in self.circuit.inputs:
-            raise ValueError(
-                f"terrain switch input: expected one of the inputs of circuit {self.circuit.name} "
-                f"{self.circuit.inputs}; got {input!r}"
-            )
-        if when not in self.TERRAIN_SWITCH_WHEN:
-            raise ValueError(f"switch_when: expected one of {list(self.TERRAIN_SWITCH_WHEN)}; got {when!r}")
-        if mode not in self.TERRAIN_SWITCH_MODES:
-            raise ValueError(f"terrain_switch: expected one of {list(self.TERRAIN_SWITCH_MODES)}; got {mode!r}")
-        if mode == "gradual" and not seconds > 0:
-            raise ValueError(f"switch_seconds: expected a duration in s > 0 for a gradual switch; got {seconds!r}")
-        for group in gains or {}:
-            if group not in self.gain_groups:
-                raise ValueError(
-                    f"next_gain_{group}: expected a gain group of circuit {self.circuit.name} (gain_groups "
-                    f"{list(self.gain_groups)}); it has no {group!r}"
-                )
-        if band is not None and not (band[0] >= 0 and band[1] > 0):
-            raise ValueError(f"switch_band: expected (k >= 0, seconds > 0); got {band!r}")
-        if detector not in DETECTORS:
-            raise ValueError(f"switch_detector: expected one of {list(DETECTORS)}; got {detector!r}")
-        if detector == "time":
-            band, threshold = None, 0.0
-        elif band is None and threshold is None:
-            raise ValueError("terrain switch: expected a threshold, or a band to measure it by")
-        if detector not in ("torso", "time") and band is None:
-            raise ValueError(f"switch_detector {detector!r}: expected a band (switch_band) measured on the walk")
-        if when == "outside" and band is None and detector != "time":
-            raise ValueError("switch_when 'outside': expected a band (switch_band) to leave; got a threshold")
-        watch = Watch(make_detector(self, detector, input), when, after, band=band, threshold=threshold)
-        self._terrain = TerrainSwitch(self, watch, input, mode, seconds, gains or {}, sigma_s, sigma_joints, theta_mlr)
-        self._terrain_detector = detector
-        self.terrain_threshold = self._terrain.threshold()  # a given threshold: known from the start
-
-    def watch_terrain(self, detectors, band: tuple[float, float], after: float, torso_input: str = "torso_pitch"):
-        """Watch ``detectors`` (terrain.py ``DETECTORS``) this trial without switching: each measures its band (k,
-        seconds) from ``after`` s and records when it first leaves it (``detector_events``), to compare detectors on
-        the same walk (issue 29). ``reset`` stops watching."""
-        watches = [Watch(make_detector(self, name, torso_input), "outside", after, band=band) for name in detectors]
-        self._watcher = Watcher(watches) if watches else None
-
-    @property
-    def terrain_detector(self) -> str | None:
-        """What the armed (or fired) terrain switch watches this trial (terrain.py ``DETECTORS``), or None."""
-        return self._terrain_detector
-
-    @property
-    def detector_events(self) -> list:
-        """The watched detectors' firings this trial (``watch_terrain``), in order."""
-        return self._watcher.events if self._watcher is not None else []
-
-    @property
-    def terrain_switch_jumps(self) -> list[tuple[float, float]]:
-        """(time s, rad) for every tick the terrain switch moved parameters: the largest change of any joint's command
-        the switch itself made in that tick (the state held; continuity of the switch, issue 29)."""
-        return list(self._switch_jumps)
-
     def set_descending(self, alpha_mlr=None, theta_mlr=None, joints: list[str] | None = None) -> None:
         """Descending (MLR) control of the named joints' PF neurons (4.9); theta_MLR with the signs of §7.6."""
         idx = self._joint_indices(joints)
@@ -542,44 +360,6 @@ class CPGNetwork:
             for one, other in ((ia, ib), (ib, ia)):
                 self.coupling[2 * one : 2 * one + 2, 2 * other : 2 * other + 2] = 0.0
         self._update_coefficients()
-
-    #: what ``set_phase_reset`` takes
-    PHASE_RESET_MODES = ("off", "pulse", "state", "circuit")
-
-    def set_phase_reset(self, mode: str) -> None:
-        """How the circuit's phase resets act until the next ``reset`` (which restores "circuit"): "off" (none),
-        "pulse" or "state" (every entry acts so, each still as its ``enabled``), "circuit" (each as its file says). A
-        state reset needs every entry to store a state for each of its joints (ValueError naming those that do not)."""
-        if mode not in self.PHASE_RESET_MODES:
-            raise ValueError(f"phase_reset: expected one of {list(self.PHASE_RESET_MODES)}; got {mode!r}")
-        resets = self.circuit.phase_resets
-        problem = self.circuit.state_reset_problem() if mode == "state" else ""
-        if problem:
-            raise ValueError(f"phase_reset: {problem}")
-        self.phase_reset_enabled = np.array([r.enabled and mode != "off" for r in resets], dtype=bool)
-        as_state = [r.mode == "state" if mode == "circuit" else mode == "state" for r in resets]
-        self.phase_reset_as_state = np.array(as_state, dtype=bool)
-
-    def arm_switches(self, indices) -> None:
-        """Arm only the circuit's switches ``indices`` (of ``circuit.switches``) for this trial (``reset`` arms those
-        marked ``armed`` again): how a controller chooses one of its presets per trial, or none."""
-        chosen = sorted({int(i) for i in indices})
-        for i in chosen:
-            if not 0 <= i < len(self.circuit.switches):
-                raise ValueError(f"switch index {i}: expected one below {len(self.circuit.switches)}")
-        self._pending_switches = [i for i in chosen if not self._switched[:, i].all()]
-
-    def set_start_slope(self, slope: float) -> None:
-        """This trial starts on ground sloping ``slope`` rad (uphill +): at its first tick the circuit's ``start_slope``
-        joints command their calibrated start pose shifted by it (``reset`` forgets it)."""
-        self._start_slope = float(slope)
-
-    def set_switch_time(self, at: float) -> None:
-        """Fire this trial's armed time-triggered switches at ``at`` s instead of their ``at`` (``reset`` restores it):
-        how a trial puts a switch where its push is (E4.4, E4.7)."""
-        for n in self._pending_switches:
-            if self.circuit.switches[n].at is not None:
-                self._switch_at[n] = float(at)
 
     def _joint_indices(self, joints: list[str] | None) -> np.ndarray:
         if joints is None:
@@ -840,209 +620,6 @@ class CPGNetwork:
         constant[:, F:n:2] = per_joint / self.tau_m
         constant[:, n:] = slow
         return constant
-
-    def _phase_resets(self, rho: np.ndarray) -> None:
-        """§7.10 (L1270-1282): a sensory neuron rising through its threshold (``ResetTrigger``: once per landing, not
-        in the start-up transient) starts a pulse into its joint's RG, or sets its joints' RGs to the stance-onset
-        state (V, q) the entry stores (``phase_reset_as_state``): a reset of the phase, wherever the rhythm was."""
-        if not self._resets:
-            return
-        sensor, joint, amplitude, duration, _ = self._reset_arrays
-        fired = self._reset_trigger(rho[:, sensor], self.time, self.phase_reset_enabled)
-        if fired is None:
-            return
-        for n in np.flatnonzero(fired.any(axis=0)):
-            copies = fired[:, n]
-            if self.phase_reset_as_state[n]:
-                cols, V, q = self._reset_states[n]
-                rows = np.flatnonzero(copies)[:, None]
-                self.y[rows, 0, cols] = V
-                self.y[rows, 1, cols] = q
-            else:
-                self._pulse_amplitude[copies, joint[n]] = amplitude[n]
-                self._pulse_remaining[copies, joint[n]] = duration[n]
-                self._pulsing = True
-            mode = "state" if self.phase_reset_as_state[n] else "pulse"
-            self.phase_reset_events.append(PhaseResetEvent(self.time, int(n), mode, copies.copy()))
-
-    def _first_tick(self, phi: np.ndarray, rho: np.ndarray) -> None:
-        """A trial's first tick: ``start_from_pose`` (the named joints' command starts at the measured pose),
-        ``start_slope`` (the named joints' command starts at their calibrated pose shifted by the slope), and the
-        motor neurons' drive at rest on this frame, which the group gain multipliers scale the drive about."""
-        every = np.ones(self.batch, dtype=bool)
-        if self._start_from_pose:
-            self._hold_at_switch.extend((every, j, phi[:, source].copy()) for j, source in self._start_from_pose)
-        if self._start_slope is not None:  # circuit start_slope: the calibrated start pose shifted by the slope
-            slope = self._start_slope
-            self._hold_at_switch.extend(
-                (every, j, np.full(self.batch, pose0 + k * slope)) for j, pose0, k in self._start_slope_joints
-            )
-        if self.gain_groups and self.circuit.command == "position":
-            self._rest_drive = self._drive_at_rest(rho)
-            self.theta0 += (self._circuit_gain - self._gain) * self._rest_drive  # multipliers set before the trial
-
-    def _drive_at_rest(self, rho: np.ndarray) -> np.ndarray:
-        """MN_E - MN_F per joint, (batch, joints), with every RG at rest (V = 0) and the sensory neurons ``rho``: what
-        the reflexes alone make the motor neurons say, as (4.9)-(4.12) in ``_outputs`` with the RG term 0."""
-        n = self.n_neurons
-        drive = rho @ self._w_sensory
-        pf = _logistic(self._pf_half_slope, drive[:, :n] / self._pf_divisor - self._pf_centre)  # (4.10), (4.9)
-        mn = _logistic(self._mn_half_slope, (self._w_pf2mn * pf + drive[:, n:]) / self._mn_divisor - self.mn_theta)
-        return mn[:, E::2] - mn[:, F::2]
-
-    def _posture(self, phi: np.ndarray, control_dt: float) -> None:
-        """The torso held near its target (L1764, §7.18; circuit ``posture``): each of the posture's joints' theta_0
-        moves by gain sign (input - target) dt this tick, its accumulated shift kept within +-limit."""
-        posture, old = self.circuit.posture, self._posture_shift
-        value = phi[:, self._posture_input]
-        if posture.window > 0:  # the input's mean over the last window (one gait cycle: its swing averages out)
-            if self._posture_values is None:
-                self._posture_values = np.zeros((self.batch, max(1, int(round(posture.window / control_dt)))))
-            n = self._posture_values.shape[1]
-            slot = self.tick % n
-            self._posture_sum += value - self._posture_values[:, slot]
-            self._posture_values[:, slot] = value
-            self._posture_count = min(self._posture_count + 1, n)
-            value = self._posture_sum / self._posture_count
-        lean = value - posture.target  # rad, + = past the target in the input's + direction
-        shift = old + np.multiply.outer(lean * (self.posture_gain * control_dt), self._posture_signs)
-        np.minimum(np.maximum(shift, -posture.limit, out=shift), posture.limit, out=shift)  # np.clip, cheaper
-        self.theta0[:, self._posture_joints] += shift - old
-        self._posture_shift = shift
-
-    def _hold_commands(self) -> None:
-        """A continuous switch's last part: theta_0 := angle - G (MN_E - MN_F) with this tick's MN, so that the command
-        equals the angle measured at the switch."""
-        mn = self._mn
-        for mask, j, angle in self._hold_at_switch:
-            drive = self._gain[mask, j] * (mn[mask, 2 * j + E] - mn[mask, 2 * j + F])
-            self.theta0[mask, j] = angle - drive
-        self._hold_at_switch.clear()
-
-    def _switches(self, phi: np.ndarray, control_dt: float) -> None:
-        """The circuit's pattern switches (§7.11) whose trigger fires this tick: time ``at``, input level ``above``, or
-        input rate ``rate_above`` (the change since the last tick over ``control_dt``; none on the first tick)."""
-        for n in list(self._pending_switches):
-            s, i = self.circuit.switches[n], self._switch_input[n]
-            if s.at is not None:
-                at = self._switch_at.get(n, s.at)  # a trial may move a time trigger (set_switch_time)
-                due = np.full(self.batch, at - 1e-9 <= self.time)
-            elif s.rate_above is not None:
-                if self._previous_phi is None:
-                    continue
-                due = (phi[:, i] - self._previous_phi[:, i]) / control_dt > s.rate_above
-            else:
-                due = phi[:, i] > s.above
-            due &= ~self._switched[:, n]
-            if due.any():
-                self._switched[due, n] = True
-                patterns = {name: (rg.sigma_s, rg.sigma_f) for name, rg in s.joints.items()}
-                kicks = {name: s.joint_kicks.get(name, s.kick) for name in s.joints}
-                rates = {}
-                if s.kick_direction == "motion":
-                    kicks, rates = self._kicks_by_motion(kicks, phi, control_dt)
-                self.switch_pattern(
-                    patterns,
-                    kick=kicks,
-                    duration=s.kick_duration,
-                    sensors=phi,
-                    where=due,
-                    inhibit=s.inhibit,
-                    continuous=s.theta0 == "continuous",
-                    name=s.name,
-                    extension_rates=rates,
-                )
-                if self._switched[:, n].all():
-                    self._pending_switches.remove(n)
-        self._previous_phi = phi.copy()
-
-    def _kicks_by_motion(self, kicks: dict[str, float], phi: np.ndarray, control_dt: float) -> tuple[dict, dict]:
-        """``kick_direction: motion`` (issue 23's reading of E4.4: each joint kicked in the direction it is moving; the
-        switch's direction is the injected current's, L1437): each joint's kick keeps its magnitude, its sign pushes
-        the joint further the way it moves. Its rate toward extension is sign(G) d angle / dt over the last
-        tick (G > 0 where + rotation is extension; the angle_input's change over ``control_dt``); a kick of +I goes
-        into RG-F (§5's convention), so a joint moving toward extension gets -|kick|, one moving toward flexion
-        +|kick|, one not moving (or on the trial's first tick, no rate yet) its kick as given. Returns the kicks per
-        batch copy and the rates."""
-        out, rates = {}, {}
-        for name, kick in kicks.items():
-            j = self.circuit.joint_index(name)
-            source = self._angle_input[j]
-            if self._previous_phi is None:
-                rate = np.zeros(self.batch)
-            else:
-                rate = np.sign(self._gain[:, j]) * (phi[:, source] - self._previous_phi[:, source]) / control_dt
-            out[name] = np.where(rate > 0, -abs(kick), np.where(rate < 0, abs(kick), kick))
-            rates[name] = rate
-        return out, rates
-
-    def switch_pattern(
-        self,
-        patterns: dict[str, tuple[float, float]],
-        kick: float | dict[str, float] = 1.0,
-        duration: float = 0.2,
-        sensors=None,
-        where=None,
-        inhibit=(),
-        continuous: bool = True,
-        name: str | None = None,
-        extension_rates: dict | None = None,
-    ) -> None:
-        """§7.11: set each named joint's (sigma_s, sigma_f), reset its V = q = 0 (the author's later method, digest
-        §5), and inject +kick into RG-F / -kick into RG-E for ``duration`` s; ``kick`` is one number or one per joint
-        (its sign the direction of that joint's switch, L1437; a joint's value may be an array over the batch copies).
-        ``inhibit``: joint pairs whose couplings are silenced (L1311; all copies, so ``where`` must then select all or
-        none). ``where``: boolean mask of the batch copies to switch (default all).
-
-        A position-commanded joint's theta_0 (if it names ``angle_input`` and ``sensors`` are given): ``continuous``
-        (the default) sets theta_0 := angle - G (MN_E - MN_F) at the end of this tick, so the command equals the
-        measured angle (the joint goes on from where it is); ``continuous=False`` sets theta_0 := the measured angle,
-        the rule of the author's 2017 scripts (digest §5, last bullet; not the thesis's), whose circuit has its
-        reflexes off: here the command then jumps by the offset the joint's reflexes held. Recorded in
-        ``switch_events`` (with ``name`` and the ``extension_rates`` a motion-directed kick used)."""
-        mask = np.ones(self.batch, dtype=bool) if where is None else np.asarray(where, dtype=bool)
-        kicks = kick if isinstance(kick, dict) else dict.fromkeys(patterns, kick)
-        if inhibit and not mask.all():
-            raise ValueError("inhibiting couplings in some batch copies only: the copies share one coupling matrix")
-        for joint, (sigma_s, sigma_f) in patterns.items():
-            j = self.circuit.joint_index(joint)
-            cols = [2 * j + E, 2 * j + F]
-            for array, value in ((self.sigma_s, sigma_s), (self.sigma_f, sigma_f)):
-                array[np.ix_(mask, cols)] = value
-            self.sigma_in[np.ix_(mask, cols)] = sigma_s
-            self.sigma_out[np.ix_(mask, cols)] = sigma_s
-            self.y[np.ix_(mask, [0, 1], cols)] = 0.0
-            self._pulse_amplitude[mask, j] = np.broadcast_to(kicks.get(joint, 0.0), (self.batch,))[mask]
-            self._pulse_remaining[mask, j] = duration
-            self._pulsing = True
-            source = self._angle_input[j]
-            if sensors is not None and source is not None and self.circuit.command == "position":
-                phi = np.broadcast_to(sensors, (self.batch, len(self.circuit.inputs)))
-                self.theta0[mask, j] = phi[mask, source]
-                if continuous:
-                    self._hold_at_switch.append((mask.copy(), j, phi[mask, source].copy()))
-        if inhibit:
-            self.inhibit_couplings(inhibit)
-        else:
-            self._update_coefficients()
-
-        def per_copy(value) -> float | np.ndarray:  # one number, or the switched copies' when they differ
-            switched = np.broadcast_to(np.asarray(value, dtype=float), (self.batch,))[mask]
-            return float(switched[0]) if np.all(switched == switched[0]) else switched.copy()
-
-        rates = extension_rates or {}
-        self.switch_events.append(
-            SwitchEvent(
-                time=self.time,
-                patterns={joint: (float(s), float(f)) for joint, (s, f) in patterns.items()},
-                kicks={joint: per_copy(kicks.get(joint, 0.0)) for joint in patterns},
-                inhibited=tuple(tuple(pair) for pair in inhibit),
-                copies=mask.copy(),
-                name=name,
-                kick_direction="motion" if rates else "fixed",
-                extension_rates={joint: per_copy(rate) for joint, rate in rates.items()},
-            )
-        )
 
     # ---------------------------------------------------------------- outputs
 
