@@ -94,6 +94,17 @@ class AnkleCentres:
 class AnkleAdaptation:
     """``CPGNetwork``'s ankle adaptation (``AnkleCentres`` above): switching it per trial, and reading it."""
 
+    def _build_ankles(self, circuit) -> None:
+        """Each ankle's centre following the slope its foot senses (``AnkleCentres``), if the circuit has them."""
+        self._ankles = AnkleCentres(circuit, self.batch) if circuit.ankle_adaptation is not None else None
+
+    def _reset_ankles(self) -> None:
+        """A trial's start: adapting as the circuit says, nothing sensed yet."""
+        adaptation = self.circuit.ankle_adaptation
+        self.ankle_adaptation = bool(adaptation is not None and adaptation.enabled)  # on this trial (issue 29)
+        if self._ankles is not None:
+            self._ankles.reset()
+
     def set_ankle_adaptation(self, on: bool) -> None:
         """The ankles' centres follow the sensed slope this trial (``ankle_adaptation``; ``reset`` restores the
         circuit's ``enabled``)."""

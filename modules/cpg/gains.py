@@ -1,10 +1,10 @@
-"""The motor neurons' gains in groups (thesis ch. 5, L1631, Fig. 5.9; digest §7.8), as part of ``CPGNetwork``.
+"""The motor neurons' gains in groups (thesis §5.6.1, L1631, Fig. 5.9; digest §7.8), as part of ``CPGNetwork``.
 
-Chapter 5 learns one gain per group: w1 for the pitch joints, w2 for both roll joints. The circuit's ``gain_groups``
-name the joints of each group, and ``set_gain_multiplier`` scales every gain G of a group by one number (1 = the
-calibrated gait). The thesis has one G per group (§7.8); our gait is calibrated with one G per joint, so a common
-multiplier is the faithful reading of "one G for all pitch joints, one for both roll joints". A position command is
-scaled about the drive at rest (``set_gain_multiplier``), so that the calibrated standing pose stays where it is.
+Chapter 5 learns the motor-neuron gains w1 (pitch) and w2 (roll) (Fig. 5.9 caption): the circuit's ``gain_groups`` name
+the joints of each group, and ``set_gain_multiplier`` scales every gain G of a group by one number (1 = the calibrated
+gait). The thesis has one G per group (§7.8); our gait is calibrated with one G per joint, so a common multiplier is the
+faithful reading of "one G for all pitch joints, one for both roll joints". A position command is scaled about the
+drive at rest (``set_gain_multiplier``), so that the calibrated standing pose stays where it is.
 """
 
 from __future__ import annotations
@@ -16,6 +16,23 @@ from .equations import E, F, _logistic
 
 class GainGroups:
     """``CPGNetwork``'s group gain multipliers (w1 pitch, w2 roll) and the drive at rest they scale about."""
+
+    def _build_gains(self, circuit) -> None:
+        """The calibrated gain per joint, and the joints of each group."""
+        self._circuit_gain = np.array([j.gain for j in circuit.joints])  # the calibrated G per joint
+        #: group name (pitch, roll) -> its joints' indices (circuit ``gain_groups``; ch. 5's w1, w2)
+        self.gain_groups = {
+            group: np.array([circuit.joint_index(name) for name in names], dtype=int)
+            for group, names in circuit.gain_groups.items()
+        }
+
+    def _reset_gains(self) -> None:
+        """A trial's start: every multiplier 1 (the circuit's gains), no drive at rest yet."""
+        b = self.batch
+        self._gain = np.tile(self._circuit_gain, (b, 1))
+        #: group -> its gain multiplier per batch copy (1 = the circuit's gains)
+        self.gain_multipliers = {group: np.ones(b) for group in self.gain_groups}
+        self._rest_drive: np.ndarray | None = None  # MN_E - MN_F at rest on the first frame (set_gain_multiplier)
 
     def set_gain_multiplier(self, group: str, value) -> None:
         """Ch. 5's learnt MN gain of a group (w1 pitch, w2 roll, L1631): every joint of ``gain_groups[group]`` gets its

@@ -30,29 +30,16 @@ Choices where the thesis is silent (CPG-HUMANOID.md, "the digest", §7), followe
 - §7.6: theta_MLR enters with opposite signs: theta_eff = theta - theta_MLR on PF-E and theta + theta_MLR
   on PF-F, so +0.5 is extensor domination (L1160).
 - §7.7: alpha_MLR literally as in (4.9): the PF slope is alpha * alpha_MLR.
-- §7.10: phase resetting (L1270-1282: "the rhythmic neurons were driven by ground contact force sensors") when a
-  sensory neuron (heel contact GB) rises through 0.5, once per landing (a refractory time, none during the start-up
-  transient): either a pulse (default -1 into RG-F, +1 into RG-E, 40 ms) into a joint's RG, or (``mode: state``,
-  §7.10's alternative) a jump of a leg's RGs to a stored stance-onset state (V, q) measured on the unperturbed gait
-  (``calibrate.py``); switchable per trial (``set_phase_reset``).
-- §7.11: pattern switching = new (sigma_s, sigma_f), V = q = 0, then a kick of +I (F) / -I (E) for 0.2 s. A
-  position-commanded joint's theta_0 is set so that its command stays at the measured angle (``theta0:
-  continuous``, the default: the joint goes on from where it is). The author's later (2017) scripts set theta_0 :=
-  the measured angle instead (digest §5, last bullet; ``theta0: angle``): their circuit has its reflexes off, and in
-  ours, whose reflexes hold MN_E - MN_F away from 0, that makes the command jump by the reflexes' offset. A kick's
-  sign is given, or (``kick_direction: motion``, issue 23's E4.4) follows the way the joint moves.
+The logic around these equations, one seam per module, each a part (a mixin) of ``CPGNetwork`` that builds its own
+state in ``_build_*`` and restarts it per trial in ``_reset_*``:
 
-Chapter 5 (the humanoid's learnt parameters, L1631; slopes and switching, §5.7-5.8 L1737-1766):
-
-- the motor-neuron gains (w1 in pitch, w2 in roll, Fig. 5.9 caption): the circuit's ``gain_groups`` name the joints of
-  each group, and ``set_gain_multiplier`` scales every gain G of a group by one number (1 = the calibrated gait). The
-  thesis has one G per group (§7.8); our gait is calibrated with one G per joint, so a common multiplier is the faithful
-  reading of "one G for all pitch joints, one for both roll joints";
-- the torso held about 10 deg from the vertical (L1764, §7.18): the circuit's ``posture``, a slow integral term on the
-  named joints' theta_0 (``Posture`` in circuit.py; ``set_posture_gain``), applied at the end of each tick;
-- switching parameters while walking when the terrain changes (§5.8, L1759-1766; §7.17): ``arm_terrain_switch``
-  moves the group gains and sigma_s from their values to new ones, at once or linearly over some seconds, when an
-  input (the torso pitch) reaches a threshold after a start-up time; once per trial (``terrain_switch_events``).
+- ``trial_start.py``: a trial's first tick (start from the pose, start on a slope, L1737) and the start ramp;
+- ``gains.py``: ch. 5's learnt gains in groups (w1 pitch, w2 roll, L1631), about the calibrated gait's drive at rest;
+- ``phase_reset.py``: phase resetting (§7.10, L1270-1282);
+- ``switching.py``: pattern switching (§7.11, L1311, L1437);
+- ``terrain.py``: switching parameters when the terrain changes (§5.8, L1759-1766; §7.17), and detectors watched;
+- ``adaptation.py``: each ankle's centre following the sensed slope (L1417, L1764; issue 29);
+- ``posture.py``: the torso held near an angle (L1764, §7.18).
 
 Nothing of these costs a tick when off: one test each in ``advance``.
 
@@ -70,7 +57,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .adaptation import AnkleAdaptation, AnkleCentres
+from .adaptation import AnkleAdaptation
 from .circuit import Circuit
 from .equations import (  # noqa: F401 - the cell equations, importable from here as before
     E,
@@ -90,7 +77,7 @@ from .gains import GainGroups
 from .phase_reset import PhaseResetting
 from .posture import Posture
 from .switching import PatternSwitching
-from .terrain import TerrainSwitch, TerrainSwitchEvent, TerrainSwitching, TerrainThreshold, Watcher
+from .terrain import TerrainSwitching
 from .trial_start import TrialStart
 
 #: ``np.dot``'s C function without its ``__array_function__`` dispatch (a Python call per use, about 0.3 us: 50 uses per
@@ -98,9 +85,6 @@ from .trial_start import TrialStart
 _dot = getattr(np.dot, "_implementation", np.dot)
 
 TARGETS = ("PF_E", "PF_F", "MN_E", "MN_F")
-
-
-# The cell equations are in equations.py; the events and the reset trigger in events.py.
 
 
 class CPGNetwork(TrialStart, GainGroups, PhaseResetting, PatternSwitching, TerrainSwitching, AnkleAdaptation, Posture):
@@ -134,10 +118,29 @@ class CPGNetwork(TrialStart, GainGroups, PhaseResetting, PatternSwitching, Terra
         self.joint_names = [j.name for j in circuit.joints]
         nj = len(circuit.joints)
         self.n_joints, self.n_neurons = nj, 2 * nj
-        b, n = self.batch, self.n_neurons
         cell = circuit.cell
         self.tau_m, self.tau_s, self.A_f, self.E_s = cell.tau_m, cell.tau_s, cell.A_f, cell.E_s
+        self._build_synapses(circuit)
+        # scheduled kicks (injected currents, §7.1)
+        self._kicks = [
+            (np.array([circuit.joint_index(name) for name in k.joints]), k.start, k.duration, k.amplitude)
+            for k in circuit.kicks
+        ]
+        self._build_rk4_buffers()
 
+        # the logic around the equations, one seam each (see their modules)
+        self._build_gains(circuit)
+        self._build_posture(circuit)
+        self._build_ankles(circuit)
+        self._build_phase_resets(circuit)
+        self._build_switches(circuit)
+        self._build_trial_start(circuit)
+        self.reset(0)
+
+    def _build_synapses(self, circuit: Circuit) -> None:
+        """The circuit's synapses as the tick uses them: the RG -> RG couplings (§7.3, Table 4.1), the sensory neurons
+        (4.13) and their synaptic tables into PF (4.10) and MN (4.12), the RG -> PF -> MN weights."""
+        n = self.n_neurons
         # RG -> RG synapses through tanh(V / A_f) (§7.3): W[target, source]; a switch may silence some (reset restores)
         W = np.zeros((n, n))
         for j, joint in enumerate(circuit.joints):
@@ -176,64 +179,13 @@ class CPGNetwork(TrialStart, GainGroups, PhaseResetting, PatternSwitching, Terra
 
         self.mn_alpha, self.mn_theta = circuit.motor_neuron.alpha, circuit.motor_neuron.theta
         self._mn_half_slope = 0.5 * self.mn_alpha  # halved for _logistic
-        self._circuit_gain = np.array([j.gain for j in circuit.joints])  # the calibrated G per joint
-        #: group name (pitch, roll) -> its joints' indices (circuit ``gain_groups``; ch. 5's w1, w2)
-        self.gain_groups = {
-            group: np.array([circuit.joint_index(name) for name in names], dtype=int)
-            for group, names in circuit.gain_groups.items()
-        }
-        posture = circuit.posture  # the torso held near an angle (L1764, §7.18): (input, joints, signs, target, limit)
-        self._relative_sensors = np.zeros(0, dtype=int)
-        if posture is not None:
-            self._posture_input = circuit.inputs.index(posture.input)
-            self._posture_joints = np.array([circuit.joint_index(name) for name in posture.joints], dtype=int)
-            self._posture_signs = np.array([float(sign) for sign in posture.joints.values()])
-            self._relative_sensors = np.array([self.sensor_names.index(n) for n in posture.relative_sensors], dtype=int)
-        # each ankle's centre following the slope its foot senses (issue 29; adaptation.py)
-        self._ankles = AnkleCentres(circuit, self.batch) if circuit.ankle_adaptation is not None else None
-        self._angle_input = [
-            None if j.angle_input is None else circuit.inputs.index(j.angle_input) for j in circuit.joints
-        ]
 
-        # pulses, triggers
-        self._kicks = [
-            (np.array([circuit.joint_index(name) for name in k.joints]), k.start, k.duration, k.amplitude)
-            for k in circuit.kicks
-        ]
-        resets = circuit.phase_resets
-        self._resets = [
-            (self.sensor_names.index(r.sensor), circuit.joint_index(r.joint), r.amplitude, r.duration, r.threshold)
-            for r in resets
-        ]
-        self._reset_arrays = tuple(np.array(column) for column in zip(*self._resets, strict=True))
-        self._reset_trigger = ResetTrigger(
-            [r.threshold for r in resets], [r.refractory for r in resets], [r.after for r in resets], self.batch
-        )
-        # a state reset's target per entry: the RG columns of its joints [E, F, E, F, ...] and their V and q
-        # (None: the entry stores no complete state, so it can act as a pulse only)
-        self._reset_states: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] = []
-        for r in resets:
-            if r.missing_states():
-                self._reset_states.append(None)
-                continue
-            names = r.state_joints
-            cols = np.array([2 * circuit.joint_index(name) + side for name in names for side in (E, F)])
-            V = np.array([cell[0] for name in names for cell in (r.state[name].E, r.state[name].F)])
-            q = np.array([cell[1] for name in names for cell in (r.state[name].E, r.state[name].F)])
-            self._reset_states.append((cols, V, q))
-        self._switch_input = [None if s.input is None else circuit.inputs.index(s.input) for s in circuit.switches]
-        self._start_from_pose = [
-            (circuit.joint_index(name), circuit.inputs.index(circuit.joints[circuit.joint_index(name)].angle_input))
-            for name in circuit.start_from_pose
-        ]
-        self._start_slope_joints = [
-            (circuit.joint_index(name), circuit.joints[circuit.joint_index(name)].pose0, per_slope)
-            for name, per_slope in circuit.start_slope.items()
-        ]
-
-        # buffers of the RK4 hot path (_integrate): a stage's input z = [V, q, tanh(sigma_f V / A_f), tanh(V / A_f)]
-        # per copy; the state y = [V, q] is the first half of stage 1's buffer, so stage 1 reads it in place
-        self._phi = np.zeros((b, len(circuit.inputs)))
+    def _build_rk4_buffers(self) -> None:
+        """The hot path's arrays, allocated once (``_integrate``): a stage's input z = [V, q, tanh(sigma_f V / A_f),
+        tanh(V / A_f)] per copy; the state y = [V, q] is the first half of stage 1's buffer, so stage 1 reads it in
+        place."""
+        b, n = self.batch, self.n_neurons
+        self._phi = np.zeros((b, len(self.circuit.inputs)))
         self._z0, self._zs = np.zeros((b, 4 * n)), np.zeros((b, 4 * n))
         self.y = self._z0[:, : 2 * n].reshape(b, 2, n)  # V = y[:, 0], q = y[:, 1]
         assert np.shares_memory(self.y, self._z0)
@@ -247,7 +199,6 @@ class CPGNetwork(TrialStart, GainGroups, PhaseResetting, PatternSwitching, Terra
         # y(t + h) = y + h/6 (k1 + 2 k2 + 2 k3 + k4) = y + (h/2 k1)/3 + 2 (h/2 k2)/3 + (h k3)/3 + (h k4)/6
         self._rk4_weights = np.array([1.0 / 3.0, 2.0 / 3.0, 1.0 / 3.0, 1.0 / 6.0])
         self._no_constant = np.zeros((b, 2 * n))  # the compiled kernel's constants on a tick without any
-        self.reset(0)
 
     # ---------------------------------------------------------------- parameters
 
@@ -296,7 +247,8 @@ class CPGNetwork(TrialStart, GainGroups, PhaseResetting, PatternSwitching, Terra
         self._pf_centre = self.pf_theta + self.theta_mlr_signed
 
     def _load_parameters(self) -> None:
-        """The circuit's per-copy parameters, (batch, neurons): RG patterns, PF constants, couplings."""
+        """The circuit's per-copy parameters of the equations, (batch, neurons): RG patterns, PF constants, couplings,
+        the command offsets theta_0."""
         joints, b = self.circuit.joints, self.batch
 
         def per_neuron(value) -> np.ndarray:
@@ -311,21 +263,8 @@ class CPGNetwork(TrialStart, GainGroups, PhaseResetting, PatternSwitching, Terra
         self.alpha_mlr = per_neuron(lambda j: j.pf.alpha_mlr)
         theta_mlr = per_neuron(lambda j: j.pf.theta_mlr)
         self.theta_mlr_signed = theta_mlr * np.tile([-1.0, 1.0], self.n_joints)  # §7.6: -theta_MLR on E, + on F
-        self.phase_reset_enabled = np.array([r.enabled for r in self.circuit.phase_resets], dtype=bool)
-        self.phase_reset_as_state = np.array([r.mode == "state" for r in self.circuit.phase_resets], dtype=bool)
         self.theta0 = np.tile([j.theta0 for j in joints], (b, 1))
-        self._gain = np.tile(self._circuit_gain, (b, 1))
-        #: group -> its gain multiplier per batch copy (1 = the circuit's gains)
-        self.gain_multipliers = {group: np.ones(b) for group in self.gain_groups}
-        self.posture_gain = self.circuit.posture.gain if self.circuit.posture is not None else 0.0  # 1/s
-        self._update_sensor_thresholds()
-        adaptation = self.circuit.ankle_adaptation
-        self.ankle_adaptation = bool(adaptation is not None and adaptation.enabled)  # on this trial (issue 29)
-        self.start_ramp = self.circuit.start_ramp  # s
-        self._ramp_share = 0.0 if self.start_ramp > 0 else 1.0
         self.coupling = self._circuit_coupling.copy()
-        self._update_coefficients()
-        self._update_pattern_formation()
 
     def set_pattern(self, sigma_s, sigma_f, joints: list[str] | None = None) -> None:
         """Set (sigma_s, sigma_f) of the named joints (all by default); each broadcast to (batch, joints)."""
@@ -379,34 +318,15 @@ class CPGNetwork(TrialStart, GainGroups, PhaseResetting, PatternSwitching, Terra
         self._pulse_amplitude = np.zeros((b, self.n_joints))
         self._pulse_remaining = np.zeros((b, self.n_joints))
         self._pulsing = False  # some pulse has time left
-        self._reset_trigger.reset()
-        #: the phase resets so far (§7.10), in order
-        self.phase_reset_events: list[PhaseResetEvent] = []
-        self._previous_phi = None
-        self._switched = np.zeros((b, len(self.circuit.switches)), dtype=bool)
-        # (copies, joint, angle) whose theta_0 is set at the end of the tick: continuous switches, start_from_pose
-        self._hold_at_switch: list[tuple[np.ndarray, int, np.ndarray]] = []
-        self._pending_switches = [i for i, s in enumerate(self.circuit.switches) if s.armed]
-        self._switch_at: dict[int, float] = {}  # switch index -> this trial's time for its trigger `at`
-        self._start_slope: float | None = None  # rad: the slope this trial starts on, if a trial says (set_start_slope)
-        #: the pattern switches so far (§7.11), in order
-        self.switch_events: list[SwitchEvent] = []
-        posture = self.circuit.posture
-        self._posture_shift = np.zeros((b, 0 if posture is None else len(posture.joints)))  # rad, L1764
-        self._terrain: TerrainSwitch | None = None  # an armed terrain switch (§5.8), until it has done its work
-        self._watcher: Watcher | None = None  # detectors watched without switching (watch_terrain)
-        self._terrain_detector: str | None = None
-        self._switch_jumps: list[tuple[float, float]] = []
-        if self._ankles is not None:
-            self._ankles.reset()
-        # the posture input's last window of values (posture.window; allocated at its first tick), a running sum
-        self._posture_values: np.ndarray | None = None
-        self._posture_sum, self._posture_count = np.zeros(b), 0
-        self._rest_drive: np.ndarray | None = None  # MN_E - MN_F at rest on the first frame (set_gain_multiplier)
-        #: the terrain switches so far (§5.8): at most one per copy and trial
-        self.terrain_switch_events: list[TerrainSwitchEvent] = []
-        #: the armed terrain switch's threshold once known (given, or measured on the walk), kept after it fired
-        self.terrain_threshold: TerrainThreshold | None = None
+        self._reset_gains()
+        self._reset_posture()
+        self._reset_ankles()
+        self._reset_phase_resets()
+        self._reset_switches()
+        self._reset_trial_start()
+        self._reset_terrain()
+        self._update_coefficients()
+        self._update_pattern_formation()
         ns = len(self.sensor_names)
         self._sensory = np.zeros((b, ns))
         self._pf = np.zeros((b, self.n_neurons))
@@ -536,14 +456,7 @@ class CPGNetwork(TrialStart, GainGroups, PhaseResetting, PatternSwitching, Terra
         if self._pending_switches:
             self._switches(phi, control_dt)
         if self._terrain is not None:
-            terrain = self._terrain
-            if terrain.tick(phi, self.time, control_dt):
-                self._terrain = None  # every copy has switched and arrived: nothing more per tick
-            if self.terrain_threshold is None:  # measured on the walk: known from the window's last tick on
-                self.terrain_threshold = terrain.threshold()
-            if terrain.jumps:
-                self._switch_jumps.extend(terrain.jumps)
-                terrain.jumps.clear()
+            self._terrain_tick(phi, control_dt)
         if self._watcher is not None:
             self._watcher.tick(phi, self.time, control_dt)
         self._constant = self._per_tick_constant()
@@ -556,9 +469,8 @@ class CPGNetwork(TrialStart, GainGroups, PhaseResetting, PatternSwitching, Terra
         if self._pulsing:
             self._pulse_remaining -= control_dt
             self._pulsing = bool(np.any(self._pulse_remaining > 1e-9))
-        if self._ramp_share < 1.0:  # the circuit's start_ramp: alpha_MLR's share of the way at the tick's end
-            self._ramp_share = min(1.0, self.time / self.start_ramp)
-            self._update_pattern_formation()
+        if self._ramp_share < 1.0:
+            self._ramp_tick()
         self._outputs(rho)
         if self._hold_at_switch:
             self._hold_commands()

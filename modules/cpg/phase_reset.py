@@ -1,9 +1,9 @@
-"""Phase resetting (thesis §4.4.4.1, L1270-1282; digest §7.10), as part of ``CPGNetwork`` (network.py).
+"""Phase resetting (thesis §4.4.4.1, L1268-1282; digest §7.10), as part of ``CPGNetwork`` (network.py).
 
 "The rhythmic neurons were driven by ground contact force sensors" (L1270): when a sensory neuron (heel contact GB)
-rises through its threshold, once per landing (``ResetTrigger``, events.py: a refractory time, none during the start-up
-transient), either a pulse (default -1 into RG-F, +1 into RG-E, 40 ms) goes into a joint's RG, or (``mode: state``,
-§7.10's alternative) a leg's RGs jump to a stored stance-onset state (V, q) measured on the unperturbed gait
+rises through 0.5, once per landing (``ResetTrigger``, events.py: a refractory time, none during the start-up
+transient), either a pulse (default -1 into RG-F, +1 into RG-E, 40 ms) into a joint's RG, or (``mode: state``, §7.10's
+alternative) a jump of a leg's RGs to a stored stance-onset state (V, q) measured on the unperturbed gait
 (``calibrate.py``); switchable per trial (``set_phase_reset``).
 """
 
@@ -11,11 +11,44 @@ from __future__ import annotations
 
 import numpy as np
 
-from .events import PhaseResetEvent
+from .equations import E, F
+from .events import PhaseResetEvent, ResetTrigger
 
 
 class PhaseResetting:
     """``CPGNetwork``'s phase resets (§7.10): how they act this trial, and firing them each tick."""
+
+    def _build_phase_resets(self, circuit) -> None:
+        """The circuit's ``phase_resets``: each entry's sensory neuron, joint, pulse, trigger, and stored state."""
+        resets = circuit.phase_resets
+        self._resets = [
+            (self.sensor_names.index(r.sensor), circuit.joint_index(r.joint), r.amplitude, r.duration, r.threshold)
+            for r in resets
+        ]
+        self._reset_arrays = tuple(np.array(column) for column in zip(*self._resets, strict=True))
+        self._reset_trigger = ResetTrigger(
+            [r.threshold for r in resets], [r.refractory for r in resets], [r.after for r in resets], self.batch
+        )
+        # a state reset's target per entry: the RG columns of its joints [E, F, E, F, ...] and their V and q
+        # (None: the entry stores no complete state, so it can act as a pulse only)
+        self._reset_states: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] = []
+        for r in resets:
+            if r.missing_states():
+                self._reset_states.append(None)
+                continue
+            names = r.state_joints
+            cols = np.array([2 * circuit.joint_index(name) + side for name in names for side in (E, F)])
+            V = np.array([cell[0] for name in names for cell in (r.state[name].E, r.state[name].F)])
+            q = np.array([cell[1] for name in names for cell in (r.state[name].E, r.state[name].F)])
+            self._reset_states.append((cols, V, q))
+
+    def _reset_phase_resets(self) -> None:
+        """A trial's start: each entry acts as its file says, none has fired."""
+        self.phase_reset_enabled = np.array([r.enabled for r in self.circuit.phase_resets], dtype=bool)
+        self.phase_reset_as_state = np.array([r.mode == "state" for r in self.circuit.phase_resets], dtype=bool)
+        self._reset_trigger.reset()
+        #: the phase resets so far (§7.10), in order
+        self.phase_reset_events: list[PhaseResetEvent] = []
 
     #: what ``set_phase_reset`` takes
     PHASE_RESET_MODES = ("off", "pulse", "state", "circuit")

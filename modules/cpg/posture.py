@@ -1,10 +1,10 @@
-"""The torso held near an angle (thesis L1764, §5.8; digest §7.18), as part of ``CPGNetwork`` (network.py).
+"""The torso held about 10 deg from the vertical (thesis §5.8, L1764; digest §7.18), as part of ``CPGNetwork``.
 
-The thesis holds the torso "about 10 deg from the vertical" with the inertial sensor (L1764) and does not say how. The
-circuit's ``posture`` (``Posture`` in circuit.py) is a slow integral term on the named joints' theta_0: each moves by
-gain x sign x (input - target) x dt per tick (the input averaged over one gait cycle), its accumulated shift kept within
-+-limit; ``set_posture_gain`` sets the gain per trial. While it is on, the sensory neurons of ``relative_sensors``
-(4.13) measure from the held lean (issue 29).
+The thesis holds the torso with the inertial sensor (L1764) and does not say how. Here the circuit's ``posture``
+(``Posture`` in circuit.py) is a slow integral term on the named joints' theta_0, applied at the end of each tick: each
+moves by gain x sign x (input - target) x dt (the input averaged over its last ``window``, one gait cycle), its
+accumulated shift kept within +-limit; ``set_posture_gain`` sets the gain per trial. While the term is on, the sensory
+neurons of ``relative_sensors`` (4.13) measure from the held lean (issue 29).
 """
 
 from __future__ import annotations
@@ -14,6 +14,26 @@ import numpy as np
 
 class Posture:
     """``CPGNetwork``'s posture term (L1764, §7.18): its gain, the thresholds it moves, its shift of theta_0."""
+
+    def _build_posture(self, circuit) -> None:
+        """The posture's input, joints and their signs, and the sensory neurons that measure from its target."""
+        posture = circuit.posture  # the torso held near an angle (L1764, §7.18): (input, joints, signs, target, limit)
+        self._relative_sensors = np.zeros(0, dtype=int)
+        if posture is not None:
+            self._posture_input = circuit.inputs.index(posture.input)
+            self._posture_joints = np.array([circuit.joint_index(name) for name in posture.joints], dtype=int)
+            self._posture_signs = np.array([float(sign) for sign in posture.joints.values()])
+            self._relative_sensors = np.array([self.sensor_names.index(n) for n in posture.relative_sensors], dtype=int)
+
+    def _reset_posture(self) -> None:
+        """A trial's start: the circuit's gain, no shift, no window of the input yet."""
+        self.posture_gain = self.circuit.posture.gain if self.circuit.posture is not None else 0.0  # 1/s
+        self._update_sensor_thresholds()
+        posture = self.circuit.posture
+        self._posture_shift = np.zeros((self.batch, 0 if posture is None else len(posture.joints)))  # rad, L1764
+        # the posture input's last window of values (posture.window; allocated at its first tick), a running sum
+        self._posture_values: np.ndarray | None = None
+        self._posture_sum, self._posture_count = np.zeros(self.batch), 0
 
     def set_posture_gain(self, gain: float) -> None:
         """The posture term's gain, 1/s, until ``reset`` (which restores the circuit's); 0 = off (L1764, §7.18)."""

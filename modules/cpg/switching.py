@@ -1,12 +1,15 @@
-"""Pattern switching (thesis §4.4.4.2-4.4.4.3, digest §7.11): the circuit's switches, their triggers, and the switch
-itself, as part of ``CPGNetwork`` (network.py).
+"""Pattern switching (thesis §4.4.4.2, L1284-1325, and §4.4.5.3, L1428-1440; digest §7.11), as part of ``CPGNetwork``
+(network.py): the circuit's switches, their triggers, and the switch itself.
 
-A switch sets each named joint's RG pattern (sigma_s, sigma_f) of (4.1)-(4.8), resets its V = q = 0 (the author's later
-method, digest §5) and injects a kick of +I into RG-F / -I into RG-E for 0.2 s (§7.11); its sign is the direction of
-the switch (L1437), given, or (``kick_direction: motion``, issue 23's E4.4) the way the joint moves. Couplings between
-named joint pairs may be silenced (L1311). A position-commanded joint's theta_0 is set so that its command stays at the
-measured angle (``theta0: continuous``, the default) or to that angle (``theta0: angle``, the author's 2017 scripts,
-digest §5 last bullet). Triggers: a time ``at``, an input level ``above``, an input rate ``rate_above``.
+- §7.11: pattern switching = new (sigma_s, sigma_f), V = q = 0, then a kick of +I (F) / -I (E) for 0.2 s. A
+  position-commanded joint's theta_0 is set so that its command stays at the measured angle (``theta0:
+  continuous``, the default: the joint goes on from where it is). The author's later (2017) scripts set theta_0 :=
+  the measured angle instead (digest §5, last bullet; ``theta0: angle``): their circuit has its reflexes off, and in
+  ours, whose reflexes hold MN_E - MN_F away from 0, that makes the command jump by the reflexes' offset. A kick's
+  sign is given (the direction of the switch, L1437), or (``kick_direction: motion``, issue 23's E4.4) follows the
+  way the joint moves.
+- A switch may silence the couplings between named joint pairs (L1311).
+- Triggers, checked once per control tick: a time ``at``, an input level ``above``, an input rate ``rate_above``.
 """
 
 from __future__ import annotations
@@ -19,6 +22,24 @@ from .events import SwitchEvent
 
 class PatternSwitching:
     """``CPGNetwork``'s pattern switches (§7.11): arming them per trial, firing them, switching."""
+
+    def _build_switches(self, circuit) -> None:
+        """Each switch's trigger input, and each joint's angle input (where a switch reads the angle it holds)."""
+        self._switch_input = [None if s.input is None else circuit.inputs.index(s.input) for s in circuit.switches]
+        self._angle_input = [
+            None if j.angle_input is None else circuit.inputs.index(j.angle_input) for j in circuit.joints
+        ]
+
+    def _reset_switches(self) -> None:
+        """A trial's start: the circuit's ``armed`` switches pending, none fired, no command held."""
+        self._previous_phi = None
+        self._switched = np.zeros((self.batch, len(self.circuit.switches)), dtype=bool)
+        # (copies, joint, angle) whose theta_0 is set at the end of the tick: continuous switches, start_from_pose
+        self._hold_at_switch: list[tuple[np.ndarray, int, np.ndarray]] = []
+        self._pending_switches = [i for i, s in enumerate(self.circuit.switches) if s.armed]
+        self._switch_at: dict[int, float] = {}  # switch index -> this trial's time for its trigger `at`
+        #: the pattern switches so far (§7.11), in order
+        self.switch_events: list[SwitchEvent] = []
 
     def arm_switches(self, indices) -> None:
         """Arm only the circuit's switches ``indices`` (of ``circuit.switches``) for this trial (``reset`` arms those

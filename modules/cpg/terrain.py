@@ -447,6 +447,28 @@ class Watcher:
 class TerrainSwitching:
     """``CPGNetwork``'s terrain switch (§5.8) and watched detectors: arming them per trial, and reading them."""
 
+    def _reset_terrain(self) -> None:
+        """A trial's start: no terrain switch armed, no detector watched."""
+        self._terrain: TerrainSwitch | None = None  # an armed terrain switch (§5.8), until it has done its work
+        self._watcher: Watcher | None = None  # detectors watched without switching (watch_terrain)
+        self._terrain_detector: str | None = None
+        self._switch_jumps: list[tuple[float, float]] = []
+        #: the terrain switches so far (§5.8): at most one per copy and trial
+        self.terrain_switch_events: list[TerrainSwitchEvent] = []
+        #: the armed terrain switch's threshold once known (given, or measured on the walk), kept after it fired
+        self.terrain_threshold: TerrainThreshold | None = None
+
+    def _terrain_tick(self, phi: np.ndarray, control_dt: float) -> None:
+        """The armed terrain switch's tick (``TerrainSwitch.tick``): its threshold once known, the jumps it made."""
+        terrain = self._terrain
+        if terrain.tick(phi, self.time, control_dt):
+            self._terrain = None  # every copy has switched and arrived: nothing more per tick
+        if self.terrain_threshold is None:  # measured on the walk: known from the window's last tick on
+            self.terrain_threshold = terrain.threshold()
+        if terrain.jumps:
+            self._switch_jumps.extend(terrain.jumps)
+            terrain.jumps.clear()
+
     #: what ``arm_terrain_switch`` takes
     TERRAIN_SWITCH_MODES = ("at_once", "gradual")
     TERRAIN_SWITCH_WHEN = ("above", "below", "outside")

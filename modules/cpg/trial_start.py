@@ -1,9 +1,10 @@
-"""A trial's start (thesis L1737, §5.7; digest §7.8, §7.16), as part of ``CPGNetwork`` (network.py).
+"""A trial's start (thesis §5.7, L1737), as part of ``CPGNetwork`` (network.py).
 
 At a trial's first tick: ``start_from_pose`` (the named joints' command starts at the measured pose), ``start_slope``
 (the named joints' command starts at their calibrated pose shifted by the slope the trial starts on: "only ankle pitch
 joint initialized from stance position", L1737), and the motor neurons' drive at rest, which the group gain multipliers
-scale the drive about (gains.py). Over its first seconds, the circuit's ``start_ramp``: alpha_MLR of (4.9) grows from 0.
+scale the drive about (gains.py). Over its first seconds, the circuit's ``start_ramp``: alpha_MLR of (4.9) grows from 0
+(``_update_pattern_formation`` in network.py reads the ramp's share of the way).
 """
 
 from __future__ import annotations
@@ -13,6 +14,23 @@ import numpy as np
 
 class TrialStart:
     """``CPGNetwork``'s start of a trial: the first tick's commands, the start ramp."""
+
+    def _build_trial_start(self, circuit) -> None:
+        """The joints whose command starts at the measured pose, and those whose start pose follows the slope."""
+        self._start_from_pose = [
+            (circuit.joint_index(name), circuit.inputs.index(circuit.joints[circuit.joint_index(name)].angle_input))
+            for name in circuit.start_from_pose
+        ]
+        self._start_slope_joints = [
+            (circuit.joint_index(name), circuit.joints[circuit.joint_index(name)].pose0, per_slope)
+            for name, per_slope in circuit.start_slope.items()
+        ]
+
+    def _reset_trial_start(self) -> None:
+        """A trial's start: the circuit's ``start_ramp``, no start slope."""
+        self.start_ramp = self.circuit.start_ramp  # s
+        self._ramp_share = 0.0 if self.start_ramp > 0 else 1.0
+        self._start_slope: float | None = None  # rad: the slope this trial starts on, if a trial says (set_start_slope)
 
     def set_start_ramp(self, seconds: float) -> None:
         """alpha_MLR grows from 0 over this trial's first ``seconds`` (0: at once); before its first tick."""
@@ -44,3 +62,8 @@ class TrialStart:
         if self.gain_groups and self.circuit.command == "position":
             self._rest_drive = self._drive_at_rest(rho)
             self.theta0 += (self._circuit_gain - self._gain) * self._rest_drive  # multipliers set before the trial
+
+    def _ramp_tick(self) -> None:
+        """The circuit's start_ramp at the tick's end: alpha_MLR's share of the way, and the PF constants with it."""
+        self._ramp_share = min(1.0, self.time / self.start_ramp)
+        self._update_pattern_formation()
