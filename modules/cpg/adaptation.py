@@ -16,6 +16,8 @@ the ground under it and its ankle's centre follows (``circuit.AnkleAdaptation``,
 At a trial's first tick the estimate is the slope the start pose shows, and the centre takes it at once: a gait started
 on a ramp and the same gait reached by walking onto the ramp then have the same ankle centres by construction (issue
 29's item 1). Plain numpy over the network's batch copies.
+
+``AnkleAdaptation`` is this seam's part of ``CPGNetwork`` (network.py): building it, switching it per trial, reading it.
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .equations import E, F, _logistic
+from .equations import E, F
 
 
 class GainGroups:
@@ -71,9 +71,6 @@ class GainGroups:
 
     def _drive_at_rest(self, rho: np.ndarray) -> np.ndarray:
         """MN_E - MN_F per joint, (batch, joints), with every RG at rest (V = 0) and the sensory neurons ``rho``: what
-        the reflexes alone make the motor neurons say, as (4.9)-(4.12) in ``_outputs`` with the RG term 0."""
-        n = self.n_neurons
-        drive = rho @ self._w_sensory
-        pf = _logistic(self._pf_half_slope, drive[:, :n] / self._pf_divisor - self._pf_centre)  # (4.10), (4.9)
-        mn = _logistic(self._mn_half_slope, (self._w_pf2mn * pf + drive[:, n:]) / self._mn_divisor - self.mn_theta)
+        the reflexes alone make the motor neurons say: (4.9)-(4.12) with the RG term 0 (``_static_layers``)."""
+        _, mn = self._static_layers(rho, 0.0)
         return mn[:, E::2] - mn[:, F::2]

@@ -501,15 +501,20 @@ class CPGNetwork(TrialStart, GainGroups, PhaseResetting, PatternSwitching, Terra
                 float(self.mn_theta),
             )
             return
-        n = self.n_neurons
-        drive = rho @ self._w_sensory  # sum_j w_j S_j of (4.10) in [:, :n], of (4.12) in [:, n:]
         rg = self.y[:, 0]
         if self._pf_bounded:  # the RG's bounded output tanh(V / A_f) (circuit ``pf_input: bounded``)
             rg = np.tanh(rg / self.A_f)
+        self._pf, self._mn = self._static_layers(rho, rg)
+
+    def _static_layers(self, rho: np.ndarray, rg) -> tuple[np.ndarray, np.ndarray]:
+        """PF and MN, (batch, neurons), from what the PF reads of its RG (``rg``: V, or tanh(V / A_f)) and the sensory
+        neurons ``rho``."""
+        n = self.n_neurons
+        drive = rho @ self._w_sensory  # sum_j w_j S_j of (4.10) in [:, :n], of (4.12) in [:, n:]
         I_pf = (self._w_rg2pf * rg + drive[:, :n]) / self._pf_divisor  # (4.10) L1110
-        self._pf = _logistic(self._pf_half_slope, I_pf - self._pf_centre)  # (4.9) L1108
-        I_mn = (self._w_pf2mn * self._pf + drive[:, n:]) / self._mn_divisor  # (4.12) L1125
-        self._mn = _logistic(self._mn_half_slope, I_mn - self.mn_theta)  # (4.11) L1123
+        pf = _logistic(self._pf_half_slope, I_pf - self._pf_centre)  # (4.9) L1108
+        I_mn = (self._w_pf2mn * pf + drive[:, n:]) / self._mn_divisor  # (4.12) L1125
+        return pf, _logistic(self._mn_half_slope, I_mn - self.mn_theta)  # (4.11) L1123
 
     def _per_tick_constant(self) -> np.ndarray | None:
         """The constant terms of dy/dt over this tick, (batch, 2 neurons) = [i_ext / tau_m, -sigma_s E_s / tau_s], or
@@ -547,9 +552,7 @@ class CPGNetwork(TrialStart, GainGroups, PhaseResetting, PatternSwitching, Terra
         voltage: (3.6) L874 V = M (G_E U_E + G_F U_F), with G_E = +1, G_F = -1 (as the reflexive controller of
         ch. 3) and M = the joint's gain, in V; position: theta_0 + G (MN_E - MN_F) in rad (author's code, digest
         §5 and §7.8)."""
-        mn = self._mn
-        drive = self._gain * (mn[:, E::2] - mn[:, F::2])
-        out = drive if self.circuit.command == "voltage" else self.theta0 + drive
+        out = self.command_all()
         return out if self.batched else out[0]
 
     def _per_joint(self, x: np.ndarray) -> np.ndarray:

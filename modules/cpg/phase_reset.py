@@ -21,11 +21,11 @@ class PhaseResetting:
     def _build_phase_resets(self, circuit) -> None:
         """The circuit's ``phase_resets``: each entry's sensory neuron, joint, pulse, trigger, and stored state."""
         resets = circuit.phase_resets
-        self._resets = [
-            (self.sensor_names.index(r.sensor), circuit.joint_index(r.joint), r.amplitude, r.duration, r.threshold)
-            for r in resets
+        # (sensory neuron, joint, amplitude, duration) per entry, as four columns (none without entries)
+        entries = [
+            (self.sensor_names.index(r.sensor), circuit.joint_index(r.joint), r.amplitude, r.duration) for r in resets
         ]
-        self._reset_arrays = tuple(np.array(column) for column in zip(*self._resets, strict=True))
+        self._reset_arrays = tuple(np.array(column) for column in zip(*entries, strict=True))
         self._reset_trigger = ResetTrigger(
             [r.threshold for r in resets], [r.refractory for r in resets], [r.after for r in resets], self.batch
         )
@@ -71,9 +71,9 @@ class PhaseResetting:
         """§7.10 (L1270-1282): a sensory neuron rising through its threshold (``ResetTrigger``: once per landing, not
         in the start-up transient) starts a pulse into its joint's RG, or sets its joints' RGs to the stance-onset
         state (V, q) the entry stores (``phase_reset_as_state``): a reset of the phase, wherever the rhythm was."""
-        if not self._resets:
+        if not self._reset_arrays:
             return
-        sensor, joint, amplitude, duration, _ = self._reset_arrays
+        sensor, joint, amplitude, duration = self._reset_arrays
         fired = self._reset_trigger(rho[:, sensor], self.time, self.phase_reset_enabled)
         if fired is None:
             return

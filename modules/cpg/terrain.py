@@ -27,6 +27,7 @@ The **terrain switch** (``TerrainSwitch``) watches one detector and, when it fir
 sigma_s and theta_MLR from their values then to the new condition's, at once or linearly over ``seconds``. Watches
 without a switch (``CPGNetwork.watch_terrain``) only record when they would have fired, to compare detectors on the
 same walks. Everything here is per batch copy and pure numpy; the network calls it once per control tick.
+``TerrainSwitching`` is this seam's part of ``CPGNetwork`` (network.py): arming, ticking and reading it.
 """
 
 from __future__ import annotations

@@ -28,8 +28,7 @@ class TrialStart:
 
     def _reset_trial_start(self) -> None:
         """A trial's start: the circuit's ``start_ramp``, no start slope."""
-        self.start_ramp = self.circuit.start_ramp  # s
-        self._ramp_share = 0.0 if self.start_ramp > 0 else 1.0
+        self._set_ramp(self.circuit.start_ramp)
         self._start_slope: float | None = None  # rad: the slope this trial starts on, if a trial says (set_start_slope)
 
     def set_start_ramp(self, seconds: float) -> None:
@@ -38,9 +37,12 @@ class TrialStart:
             raise ValueError(f"start_ramp: expected a time in s >= 0; got {seconds!r}")
         if self.tick:
             raise ValueError("start_ramp: set it before the trial's first tick")
-        self.start_ramp = float(seconds)
-        self._ramp_share = 0.0 if self.start_ramp > 0 else 1.0
+        self._set_ramp(float(seconds))
         self._update_pattern_formation()
+
+    def _set_ramp(self, seconds: float) -> None:
+        self.start_ramp = seconds  # s
+        self._ramp_share = 0.0 if seconds > 0 else 1.0  # alpha_MLR's share of the way (1: no ramp, or it is over)
 
     def set_start_slope(self, slope: float) -> None:
         """This trial starts on ground sloping ``slope`` rad (uphill +): at its first tick the circuit's ``start_slope``
