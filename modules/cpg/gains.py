@@ -45,13 +45,16 @@ class GainGroups:
         only, as G does in the author's code, whose reflexes are off (D_rest = 0, digest §5). Literally (theta_0 +
         value G D) it would also move every joint's resting angle by (value - 1) G D_rest: the knees by 0.5 rad at
         1.5, and 0 would collapse the robot instead of standing it. A voltage command is scaled as it is."""
-        if group not in self.gain_groups:
-            raise ValueError(
-                f"gain_{group}: expected a gain group of circuit {self.circuit.name} (gain_groups "
-                f"{list(self.gain_groups)}); it has no {group!r}"
-            )
+        self._check_gain_group(group, f"gain_{group}")
         values = np.broadcast_to(np.asarray(value, dtype=float), (self.batch,))
         self._set_gains(group, values, np.arange(self.batch))
+
+    def _check_gain_group(self, group: str, key: str) -> None:
+        if group not in self.gain_groups:
+            raise ValueError(
+                f"{key}: expected a gain group of circuit {self.circuit.name} (gain_groups "
+                f"{list(self.gain_groups)}); it has no {group!r}"
+            )
 
     def _set_gains(self, group: str, values: np.ndarray, rows: np.ndarray) -> None:
         """The group's multipliers of the copies ``rows`` := ``values`` (one per such copy), and their gains."""

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from .equations import E, F
-from .events import SwitchEvent
+from .events import SwitchEvent, per_copy
 
 
 class PatternSwitching:
@@ -151,42 +151,47 @@ class PatternSwitching:
         kicks = kick if isinstance(kick, dict) else dict.fromkeys(patterns, kick)
         if inhibit and not mask.all():
             raise ValueError("inhibiting couplings in some batch copies only: the copies share one coupling matrix")
-        for joint, (sigma_s, sigma_f) in patterns.items():
-            j = self.circuit.joint_index(joint)
-            cols = [2 * j + E, 2 * j + F]
-            for array, value in ((self.sigma_s, sigma_s), (self.sigma_f, sigma_f)):
-                array[np.ix_(mask, cols)] = value
-            self.sigma_in[np.ix_(mask, cols)] = sigma_s
-            self.sigma_out[np.ix_(mask, cols)] = sigma_s
-            self.y[np.ix_(mask, [0, 1], cols)] = 0.0
-            self._pulse_amplitude[mask, j] = np.broadcast_to(kicks.get(joint, 0.0), (self.batch,))[mask]
-            self._pulse_remaining[mask, j] = duration
-            self._pulsing = True
-            source = self._angle_input[j]
-            if sensors is not None and source is not None and self.circuit.command == "position":
-                phi = np.broadcast_to(sensors, (self.batch, len(self.circuit.inputs)))
-                self.theta0[mask, j] = phi[mask, source]
-                if continuous:
-                    self._hold_at_switch.append((mask.copy(), j, phi[mask, source].copy()))
+        for joint, pattern in patterns.items():
+            self._switch_joint(joint, pattern, kicks.get(joint, 0.0), duration, sensors, mask, continuous)
         if inhibit:
             self.inhibit_couplings(inhibit)
         else:
             self._update_coefficients()
 
-        def per_copy(value) -> float | np.ndarray:  # one number, or the switched copies' when they differ
-            switched = np.broadcast_to(np.asarray(value, dtype=float), (self.batch,))[mask]
-            return float(switched[0]) if np.all(switched == switched[0]) else switched.copy()
+        def switched(value) -> float | np.ndarray:  # one number, or the switched copies' when they differ
+            return per_copy(np.broadcast_to(np.asarray(value, dtype=float), (self.batch,))[mask])
 
         rates = extension_rates or {}
         self.switch_events.append(
             SwitchEvent(
                 time=self.time,
                 patterns={joint: (float(s), float(f)) for joint, (s, f) in patterns.items()},
-                kicks={joint: per_copy(kicks.get(joint, 0.0)) for joint in patterns},
+                kicks={joint: switched(kicks.get(joint, 0.0)) for joint in patterns},
                 inhibited=tuple(tuple(pair) for pair in inhibit),
                 copies=mask.copy(),
                 name=name,
                 kick_direction="motion" if rates else "fixed",
-                extension_rates={joint: per_copy(rate) for joint, rate in rates.items()},
+                extension_rates={joint: switched(rate) for joint, rate in rates.items()},
             )
         )
+
+    def _switch_joint(self, joint: str, pattern, kick, duration: float, sensors, mask: np.ndarray, continuous: bool):
+        """One joint's part of ``switch_pattern`` in the copies ``mask``: its pattern, V = q = 0, its kick, its
+        theta_0."""
+        sigma_s, sigma_f = pattern
+        j = self.circuit.joint_index(joint)
+        cols = [2 * j + E, 2 * j + F]
+        for array, value in ((self.sigma_s, sigma_s), (self.sigma_f, sigma_f)):
+            array[np.ix_(mask, cols)] = value
+        self.sigma_in[np.ix_(mask, cols)] = sigma_s
+        self.sigma_out[np.ix_(mask, cols)] = sigma_s
+        self.y[np.ix_(mask, [0, 1], cols)] = 0.0
+        self._pulse_amplitude[mask, j] = np.broadcast_to(kick, (self.batch,))[mask]
+        self._pulse_remaining[mask, j] = duration
+        self._pulsing = True
+        source = self._angle_input[j]
+        if sensors is not None and source is not None and self.circuit.command == "position":
+            phi = np.broadcast_to(sensors, (self.batch, len(self.circuit.inputs)))
+            self.theta0[mask, j] = phi[mask, source]
+            if continuous:
+                self._hold_at_switch.append((mask.copy(), j, phi[mask, source].copy()))

@@ -36,6 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .events import per_copy
+
 E, F = 0, 1
 
 #: the detectors a watch may read (see the module docstring)
@@ -101,12 +103,6 @@ class DetectorEvent:
     low: float | np.ndarray
     high: float | np.ndarray
     copies: np.ndarray
-
-
-def per_copy(values) -> float | np.ndarray:
-    """One number when every copy has the same, else the array."""
-    values = np.asarray(values, dtype=float)
-    return float(values.flat[0]) if np.all(values == values.flat[0]) else values.copy()
 
 
 class Detector:
@@ -502,6 +498,15 @@ class TerrainSwitching:
         ``detector`` (terrain.py ``DETECTORS``): what is watched, ``input`` itself ("torso", the thesis's) or another
         sensed signal (issue 29), whose band is measured the same way; "time" fires at ``after``.
         ``reset`` disarms it; the switches are in ``terrain_switch_events``."""
+        band, threshold = self._check_terrain_switch(input, threshold, when, mode, seconds, gains, band, detector)
+        watch = Watch(make_detector(self, detector, input), when, after, band=band, threshold=threshold)
+        self._terrain = TerrainSwitch(self, watch, input, mode, seconds, gains or {}, sigma_s, sigma_joints, theta_mlr)
+        self._terrain_detector = detector
+        self.terrain_threshold = self._terrain.threshold()  # a given threshold: known from the start
+
+    def _check_terrain_switch(self, input, threshold, when, mode, seconds, gains, band, detector) -> tuple:
+        """``arm_terrain_switch``'s arguments checked (ValueError naming the trial parameter); returns (band,
+        threshold) as the watch takes them (none for the "time" detector)."""
         if input not in self.circuit.inputs:
             raise ValueError(
                 f"terrain switch input: expected one of the inputs of circuit {self.circuit.name} "
@@ -514,11 +519,7 @@ class TerrainSwitching:
         if mode == "gradual" and not seconds > 0:
             raise ValueError(f"switch_seconds: expected a duration in s > 0 for a gradual switch; got {seconds!r}")
         for group in gains or {}:
-            if group not in self.gain_groups:
-                raise ValueError(
-                    f"next_gain_{group}: expected a gain group of circuit {self.circuit.name} (gain_groups "
-                    f"{list(self.gain_groups)}); it has no {group!r}"
-                )
+            self._check_gain_group(group, f"next_gain_{group}")
         if band is not None and not (band[0] >= 0 and band[1] > 0):
             raise ValueError(f"switch_band: expected (k >= 0, seconds > 0); got {band!r}")
         if detector not in DETECTORS:
@@ -531,10 +532,7 @@ class TerrainSwitching:
             raise ValueError(f"switch_detector {detector!r}: expected a band (switch_band) measured on the walk")
         if when == "outside" and band is None and detector != "time":
             raise ValueError("switch_when 'outside': expected a band (switch_band) to leave; got a threshold")
-        watch = Watch(make_detector(self, detector, input), when, after, band=band, threshold=threshold)
-        self._terrain = TerrainSwitch(self, watch, input, mode, seconds, gains or {}, sigma_s, sigma_joints, theta_mlr)
-        self._terrain_detector = detector
-        self.terrain_threshold = self._terrain.threshold()  # a given threshold: known from the start
+        return band, threshold
 
     def watch_terrain(self, detectors, band: tuple[float, float], after: float, torso_input: str = "torso_pitch"):
         """Watch ``detectors`` (terrain.py ``DETECTORS``) this trial without switching: each measures its band (k,
