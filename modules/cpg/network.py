@@ -552,7 +552,9 @@ class CPGNetwork(TrialStart, GainGroups, PhaseResetting, PatternSwitching, Terra
         voltage: (3.6) L874 V = M (G_E U_E + G_F U_F), with G_E = +1, G_F = -1 (as the reflexive controller of
         ch. 3) and M = the joint's gain, in V; position: theta_0 + G (MN_E - MN_F) in rad (author's code, digest
         §5 and §7.8)."""
-        out = self.command_all()
+        mn = self._mn  # command_all's lines, not a call to it: one call less per tick (about 0.3% of a planar tick)
+        drive = self._gain * (mn[:, E::2] - mn[:, F::2])
+        out = drive if self.circuit.command == "voltage" else self.theta0 + drive
         return out if self.batched else out[0]
 
     def _per_joint(self, x: np.ndarray) -> np.ndarray:
