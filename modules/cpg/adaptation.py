@@ -16,6 +16,8 @@ the ground under it and its ankle's centre follows (``circuit.AnkleAdaptation``,
 At a trial's first tick the estimate is the slope the start pose shows, and the centre takes it at once: a gait started
 on a ramp and the same gait reached by walking onto the ramp then have the same ankle centres by construction (issue
 29's item 1). Plain numpy over the network's batch copies.
+
+``AnkleAdaptation`` is this seam's part of ``CPGNetwork`` (network.py): building it, switching it per trial, reading it.
 """
 
 from __future__ import annotations
@@ -89,3 +91,50 @@ class AnkleCentres:
             np.clip(change, -step, step, out=change)
         self.centre += change
         return change
+
+
+class AnkleAdaptation:
+    """``CPGNetwork``'s ankle adaptation (``AnkleCentres`` above): switching it per trial, and reading it."""
+
+    def _build_ankles(self, circuit) -> None:
+        """Each ankle's centre following the slope its foot senses (``AnkleCentres``), if the circuit has them."""
+        self._ankles = AnkleCentres(circuit, self.batch) if circuit.ankle_adaptation is not None else None
+
+    def _reset_ankles(self) -> None:
+        """A trial's start: adapting as the circuit says, nothing sensed yet."""
+        adaptation = self.circuit.ankle_adaptation
+        self.ankle_adaptation = bool(adaptation is not None and adaptation.enabled)  # on this trial (issue 29)
+        if self._ankles is not None:
+            self._ankles.reset()
+
+    def set_ankle_adaptation(self, on: bool) -> None:
+        """The ankles' centres follow the sensed slope this trial (``ankle_adaptation``; ``reset`` restores the
+        circuit's ``enabled``)."""
+        if on and self._ankles is None:
+            raise ValueError(f"ankle_adaptation: circuit {self.circuit.name} has none (circuit key `ankle_adaptation`)")
+        self.ankle_adaptation = bool(on)
+
+    @property
+    def slope_estimate(self) -> np.ndarray:
+        """Each adapted foot's slope estimate, rad, + = uphill, (feet,) or (batch, feet); zeros before the first tick
+        or without an adaptation (issue 29)."""
+        out = self.slope_estimate_all()
+        return out if self.batched else out[0]
+
+    def slope_estimate_all(self) -> np.ndarray:
+        """``slope_estimate`` with the batch axis always."""
+        a = self._ankles
+        if a is None:
+            return np.zeros((self.batch, 0))
+        return a.estimate.copy() if a.estimate is not None else np.zeros((self.batch, len(a.joints)))
+
+    @property
+    def ankle_centre(self) -> np.ndarray:
+        """Each adapted ankle's centre shift (added to its theta_0), rad, (feet,) or (batch, feet)."""
+        out = self.ankle_centre_all()
+        return out if self.batched else out[0]
+
+    def ankle_centre_all(self) -> np.ndarray:
+        """``ankle_centre`` with the batch axis always."""
+        a = self._ankles
+        return a.centre.copy() if a is not None else np.zeros((self.batch, 0))

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+E, F = 0, 1  # side index: neuron 2 j + E is joint j's extensor chain, 2 j + F its flexor chain
+
 
 def fast_current(V, sigma_f, A_f):
     """(4.4) L1073: fast(V, sigma_f) = V - A_f tanh((sigma_f / A_f) V)."""

@@ -38,6 +38,12 @@ class PhaseResetEvent:
     copies: np.ndarray
 
 
+def per_copy(values) -> float | np.ndarray:
+    """One number when every copy has the same, else the array: how an event records a value per batch copy."""
+    values = np.asarray(values, dtype=float)
+    return float(values.flat[0]) if np.all(values == values.flat[0]) else values.copy()
+
+
 class ResetTrigger:
     """When phase resets fire (§7.10), one column per ``phase_resets`` entry: its sensory neuron rising through
     ``threshold`` (below it last tick, at or above it now), once per landing: not within ``refractory`` s of that

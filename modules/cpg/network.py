@@ -30,29 +30,16 @@ Choices where the thesis is silent (CPG-HUMANOID.md, "the digest", §7), followe
 - §7.6: theta_MLR enters with opposite signs: theta_eff = theta - theta_MLR on PF-E and theta + theta_MLR
   on PF-F, so +0.5 is extensor domination (L1160).
 - §7.7: alpha_MLR literally as in (4.9): the PF slope is alpha * alpha_MLR.
-- §7.10: phase resetting (L1270-1282: "the rhythmic neurons were driven by ground contact force sensors") when a
-  sensory neuron (heel contact GB) rises through 0.5, once per landing (a refractory time, none during the start-up
-  transient): either a pulse (default -1 into RG-F, +1 into RG-E, 40 ms) into a joint's RG, or (``mode: state``,
-  §7.10's alternative) a jump of a leg's RGs to a stored stance-onset state (V, q) measured on the unperturbed gait
-  (``calibrate.py``); switchable per trial (``set_phase_reset``).
-- §7.11: pattern switching = new (sigma_s, sigma_f), V = q = 0, then a kick of +I (F) / -I (E) for 0.2 s. A
-  position-commanded joint's theta_0 is set so that its command stays at the measured angle (``theta0:
-  continuous``, the default: the joint goes on from where it is). The author's later (2017) scripts set theta_0 :=
-  the measured angle instead (digest §5, last bullet; ``theta0: angle``): their circuit has its reflexes off, and in
-  ours, whose reflexes hold MN_E - MN_F away from 0, that makes the command jump by the reflexes' offset. A kick's
-  sign is given, or (``kick_direction: motion``, issue 23's E4.4) follows the way the joint moves.
+The logic around these equations, one seam per module, each a part (a mixin) of ``CPGNetwork`` that builds its own
+state in ``_build_*`` and restarts it per trial in ``_reset_*``:
 
-Chapter 5 (the humanoid's learnt parameters, L1631; slopes and switching, §5.7-5.8 L1737-1766):
-
-- the motor-neuron gains (w1 in pitch, w2 in roll, Fig. 5.9 caption): the circuit's ``gain_groups`` name the joints of
-  each group, and ``set_gain_multiplier`` scales every gain G of a group by one number (1 = the calibrated gait). The
-  thesis has one G per group (§7.8); our gait is calibrated with one G per joint, so a common multiplier is the faithful
-  reading of "one G for all pitch joints, one for both roll joints";
-- the torso held about 10 deg from the vertical (L1764, §7.18): the circuit's ``posture``, a slow integral term on the
-  named joints' theta_0 (``Posture`` in circuit.py; ``set_posture_gain``), applied at the end of each tick;
-- switching parameters while walking when the terrain changes (§5.8, L1759-1766; §7.17): ``arm_terrain_switch``
-  moves the group gains and sigma_s from their values to new ones, at once or linearly over some seconds, when an
-  input (the torso pitch) reaches a threshold after a start-up time; once per trial (``terrain_switch_events``).
+- ``trial_start.py``: a trial's first tick (start from the pose, start on a slope, L1737) and the start ramp;
+- ``gains.py``: ch. 5's learnt gains in groups (w1 pitch, w2 roll, L1631), about the calibrated gait's drive at rest;
+- ``phase_reset.py``: phase resetting (§7.10, L1270-1282);
+- ``switching.py``: pattern switching (§7.11, L1311, L1437);
+- ``terrain.py``: switching parameters when the terrain changes (§5.8, L1759-1766; §7.17), and detectors watched;
+- ``adaptation.py``: each ankle's centre following the sensed slope (L1417, L1764; issue 29);
+- ``posture.py``: the torso held near an angle (L1764, §7.18).
 
 Nothing of these costs a tick when off: one test each in ``advance``.
 
@@ -70,9 +57,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .adaptation import AnkleCentres
+from .adaptation import AnkleAdaptation
 from .circuit import Circuit
 from .equations import (  # noqa: F401 - the cell equations, importable from here as before
+    E,
+    F,
     _logistic,
     averaged_input,
     fast_current,
@@ -83,21 +72,22 @@ from .equations import (  # noqa: F401 - the cell equations, importable from her
     sigmoid,
     slow_steady_state,
 )
-from .events import PhaseResetEvent, ResetTrigger, SwitchEvent
-from .terrain import DETECTORS, TerrainSwitch, TerrainSwitchEvent, TerrainThreshold, Watch, Watcher, make_detector
+from .events import PhaseResetEvent, ResetTrigger, SwitchEvent  # noqa: F401 - importable from here as before
+from .gains import GainGroups
+from .phase_reset import PhaseResetting
+from .posture import Posture
+from .switching import PatternSwitching
+from .terrain import TerrainSwitching
+from .trial_start import TrialStart
 
 #: ``np.dot``'s C function without its ``__array_function__`` dispatch (a Python call per use, about 0.3 us: 50 uses per
 #: control tick on the hot path); the same function, so the same numbers, bit for bit (tests/test_humanoid_speed.py)
 _dot = getattr(np.dot, "_implementation", np.dot)
 
-E, F = 0, 1  # side index: neuron 2 j + E is joint j's extensor chain, 2 j + F its flexor chain
 TARGETS = ("PF_E", "PF_F", "MN_E", "MN_F")
 
 
-# The cell equations are in equations.py; the events and the reset trigger in events.py.
-
-
-class CPGNetwork:
+class CPGNetwork(TrialStart, GainGroups, PhaseResetting, PatternSwitching, TerrainSwitching, AnkleAdaptation, Posture):
     """A circuit's MLMP-CPG, ``batch`` independent copies of it integrated together.
 
     ``batch=None`` (the default) is one network whose accessors return arrays without the batch axis.
@@ -128,10 +118,29 @@ class CPGNetwork:
         self.joint_names = [j.name for j in circuit.joints]
         nj = len(circuit.joints)
         self.n_joints, self.n_neurons = nj, 2 * nj
-        b, n = self.batch, self.n_neurons
         cell = circuit.cell
         self.tau_m, self.tau_s, self.A_f, self.E_s = cell.tau_m, cell.tau_s, cell.A_f, cell.E_s
+        self._build_synapses(circuit)
+        # scheduled kicks (injected currents, §7.1)
+        self._kicks = [
+            (np.array([circuit.joint_index(name) for name in k.joints]), k.start, k.duration, k.amplitude)
+            for k in circuit.kicks
+        ]
+        self._build_rk4_buffers()
 
+        # the logic around the equations, one seam each (see their modules)
+        self._build_gains(circuit)
+        self._build_posture(circuit)
+        self._build_ankles(circuit)
+        self._build_phase_resets(circuit)
+        self._build_switches(circuit)
+        self._build_trial_start(circuit)
+        self.reset(0)
+
+    def _build_synapses(self, circuit: Circuit) -> None:
+        """The circuit's synapses as the tick uses them: the RG -> RG couplings (§7.3, Table 4.1), the sensory neurons
+        (4.13) and their synaptic tables into PF (4.10) and MN (4.12), the RG -> PF -> MN weights."""
+        n = self.n_neurons
         # RG -> RG synapses through tanh(V / A_f) (§7.3): W[target, source]; a switch may silence some (reset restores)
         W = np.zeros((n, n))
         for j, joint in enumerate(circuit.joints):
@@ -170,64 +179,13 @@ class CPGNetwork:
 
         self.mn_alpha, self.mn_theta = circuit.motor_neuron.alpha, circuit.motor_neuron.theta
         self._mn_half_slope = 0.5 * self.mn_alpha  # halved for _logistic
-        self._circuit_gain = np.array([j.gain for j in circuit.joints])  # the calibrated G per joint
-        #: group name (pitch, roll) -> its joints' indices (circuit ``gain_groups``; ch. 5's w1, w2)
-        self.gain_groups = {
-            group: np.array([circuit.joint_index(name) for name in names], dtype=int)
-            for group, names in circuit.gain_groups.items()
-        }
-        posture = circuit.posture  # the torso held near an angle (L1764, §7.18): (input, joints, signs, target, limit)
-        self._relative_sensors = np.zeros(0, dtype=int)
-        if posture is not None:
-            self._posture_input = circuit.inputs.index(posture.input)
-            self._posture_joints = np.array([circuit.joint_index(name) for name in posture.joints], dtype=int)
-            self._posture_signs = np.array([float(sign) for sign in posture.joints.values()])
-            self._relative_sensors = np.array([self.sensor_names.index(n) for n in posture.relative_sensors], dtype=int)
-        # each ankle's centre following the slope its foot senses (issue 29; adaptation.py)
-        self._ankles = AnkleCentres(circuit, self.batch) if circuit.ankle_adaptation is not None else None
-        self._angle_input = [
-            None if j.angle_input is None else circuit.inputs.index(j.angle_input) for j in circuit.joints
-        ]
 
-        # pulses, triggers
-        self._kicks = [
-            (np.array([circuit.joint_index(name) for name in k.joints]), k.start, k.duration, k.amplitude)
-            for k in circuit.kicks
-        ]
-        resets = circuit.phase_resets
-        self._resets = [
-            (self.sensor_names.index(r.sensor), circuit.joint_index(r.joint), r.amplitude, r.duration, r.threshold)
-            for r in resets
-        ]
-        self._reset_arrays = tuple(np.array(column) for column in zip(*self._resets, strict=True))
-        self._reset_trigger = ResetTrigger(
-            [r.threshold for r in resets], [r.refractory for r in resets], [r.after for r in resets], self.batch
-        )
-        # a state reset's target per entry: the RG columns of its joints [E, F, E, F, ...] and their V and q
-        # (None: the entry stores no complete state, so it can act as a pulse only)
-        self._reset_states: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] = []
-        for r in resets:
-            if r.missing_states():
-                self._reset_states.append(None)
-                continue
-            names = r.state_joints
-            cols = np.array([2 * circuit.joint_index(name) + side for name in names for side in (E, F)])
-            V = np.array([cell[0] for name in names for cell in (r.state[name].E, r.state[name].F)])
-            q = np.array([cell[1] for name in names for cell in (r.state[name].E, r.state[name].F)])
-            self._reset_states.append((cols, V, q))
-        self._switch_input = [None if s.input is None else circuit.inputs.index(s.input) for s in circuit.switches]
-        self._start_from_pose = [
-            (circuit.joint_index(name), circuit.inputs.index(circuit.joints[circuit.joint_index(name)].angle_input))
-            for name in circuit.start_from_pose
-        ]
-        self._start_slope_joints = [
-            (circuit.joint_index(name), circuit.joints[circuit.joint_index(name)].pose0, per_slope)
-            for name, per_slope in circuit.start_slope.items()
-        ]
-
-        # buffers of the RK4 hot path (_integrate): a stage's input z = [V, q, tanh(sigma_f V / A_f), tanh(V / A_f)]
-        # per copy; the state y = [V, q] is the first half of stage 1's buffer, so stage 1 reads it in place
-        self._phi = np.zeros((b, len(circuit.inputs)))
+    def _build_rk4_buffers(self) -> None:
+        """The hot path's arrays, allocated once (``_integrate``): a stage's input z = [V, q, tanh(sigma_f V / A_f),
+        tanh(V / A_f)] per copy; the state y = [V, q] is the first half of stage 1's buffer, so stage 1 reads it in
+        place."""
+        b, n = self.batch, self.n_neurons
+        self._phi = np.zeros((b, len(self.circuit.inputs)))
         self._z0, self._zs = np.zeros((b, 4 * n)), np.zeros((b, 4 * n))
         self.y = self._z0[:, : 2 * n].reshape(b, 2, n)  # V = y[:, 0], q = y[:, 1]
         assert np.shares_memory(self.y, self._z0)
@@ -241,7 +199,6 @@ class CPGNetwork:
         # y(t + h) = y + h/6 (k1 + 2 k2 + 2 k3 + k4) = y + (h/2 k1)/3 + 2 (h/2 k2)/3 + (h k3)/3 + (h k4)/6
         self._rk4_weights = np.array([1.0 / 3.0, 2.0 / 3.0, 1.0 / 3.0, 1.0 / 6.0])
         self._no_constant = np.zeros((b, 2 * n))  # the compiled kernel's constants on a tick without any
-        self.reset(0)
 
     # ---------------------------------------------------------------- parameters
 
@@ -290,7 +247,8 @@ class CPGNetwork:
         self._pf_centre = self.pf_theta + self.theta_mlr_signed
 
     def _load_parameters(self) -> None:
-        """The circuit's per-copy parameters, (batch, neurons): RG patterns, PF constants, couplings."""
+        """The circuit's per-copy parameters of the equations, (batch, neurons): RG patterns, PF constants, couplings,
+        the command offsets theta_0."""
         joints, b = self.circuit.joints, self.batch
 
         def per_neuron(value) -> np.ndarray:
@@ -305,21 +263,8 @@ class CPGNetwork:
         self.alpha_mlr = per_neuron(lambda j: j.pf.alpha_mlr)
         theta_mlr = per_neuron(lambda j: j.pf.theta_mlr)
         self.theta_mlr_signed = theta_mlr * np.tile([-1.0, 1.0], self.n_joints)  # §7.6: -theta_MLR on E, + on F
-        self.phase_reset_enabled = np.array([r.enabled for r in self.circuit.phase_resets], dtype=bool)
-        self.phase_reset_as_state = np.array([r.mode == "state" for r in self.circuit.phase_resets], dtype=bool)
         self.theta0 = np.tile([j.theta0 for j in joints], (b, 1))
-        self._gain = np.tile(self._circuit_gain, (b, 1))
-        #: group -> its gain multiplier per batch copy (1 = the circuit's gains)
-        self.gain_multipliers = {group: np.ones(b) for group in self.gain_groups}
-        self.posture_gain = self.circuit.posture.gain if self.circuit.posture is not None else 0.0  # 1/s
-        self._update_sensor_thresholds()
-        adaptation = self.circuit.ankle_adaptation
-        self.ankle_adaptation = bool(adaptation is not None and adaptation.enabled)  # on this trial (issue 29)
-        self.start_ramp = self.circuit.start_ramp  # s
-        self._ramp_share = 0.0 if self.start_ramp > 0 else 1.0
         self.coupling = self._circuit_coupling.copy()
-        self._update_coefficients()
-        self._update_pattern_formation()
 
     def set_pattern(self, sigma_s, sigma_f, joints: list[str] | None = None) -> None:
         """Set (sigma_s, sigma_f) of the named joints (all by default); each broadcast to (batch, joints)."""
@@ -331,194 +276,6 @@ class CPGNetwork:
         self.sigma_in[:, cols] = self.sigma_s[:, cols]
         self.sigma_out[:, cols] = self.sigma_s[:, cols]
         self._update_coefficients()
-
-    def set_gain_multiplier(self, group: str, value) -> None:
-        """Ch. 5's learnt MN gain of a group (w1 pitch, w2 roll, L1631): every joint of ``gain_groups[group]`` gets its
-        circuit gain times ``value`` (one number or one per batch copy; 1 = the calibrated gait) until ``reset``.
-
-        A position command scales the motor neurons' drive about its value at rest: theta_cmd = theta_0 + G D_rest +
-        value G (D - D_rest), D = MN_E - MN_F, D_rest = D with every RG at rest on the trial's first frame (the
-        reflexes' offset; ``_drive_at_rest``). So the command at rest is the calibrated one (the circuit's theta_0 is
-        calibrated so that it is the standing pose) whatever the multiplier, and the multiplier scales the oscillation
-        only, as G does in the author's code, whose reflexes are off (D_rest = 0, digest §5). Literally (theta_0 +
-        value G D) it would also move every joint's resting angle by (value - 1) G D_rest: the knees by 0.5 rad at
-        1.5, and 0 would collapse the robot instead of standing it. A voltage command is scaled as it is."""
-        if group not in self.gain_groups:
-            raise ValueError(
-                f"gain_{group}: expected a gain group of circuit {self.circuit.name} (gain_groups "
-                f"{list(self.gain_groups)}); it has no {group!r}"
-            )
-        values = np.broadcast_to(np.asarray(value, dtype=float), (self.batch,))
-        self._set_gains(group, values, np.arange(self.batch))
-
-    def _set_gains(self, group: str, values: np.ndarray, rows: np.ndarray) -> None:
-        """The group's multipliers of the copies ``rows`` := ``values`` (one per such copy), and their gains."""
-        cols = self.gain_groups[group]
-        cells = np.ix_(rows, cols)
-        gain = values[:, None] * self._circuit_gain[cols]
-        if self._rest_drive is not None:  # mid-trial: the drive at rest keeps its command (see set_gain_multiplier)
-            self.theta0[cells] += (self._gain[cells] - gain) * self._rest_drive[cells]
-        self.gain_multipliers[group][rows] = values
-        self._gain[cells] = gain
-
-    @property
-    def gain(self) -> np.ndarray:
-        """G per joint (M of (3.6) or G of theta_0 + G (MN_E - MN_F)) after the group multipliers, (joints,) or (batch,
-        joints)."""
-        return self._gain if self.batched else self._gain[0]
-
-    def set_posture_gain(self, gain: float) -> None:
-        """The posture term's gain, 1/s, until ``reset`` (which restores the circuit's); 0 = off (L1764, §7.18)."""
-        if self.circuit.posture is None:
-            raise ValueError(f"posture_gain: circuit {self.circuit.name} has no posture (circuit key `posture`)")
-        if not (np.isfinite(gain) and gain >= 0):
-            raise ValueError(f"posture_gain: expected a gain in 1/s >= 0; got {gain!r}")
-        self.posture_gain = float(gain)
-        self._update_sensor_thresholds()
-
-    def _update_sensor_thresholds(self) -> None:
-        """The sensory neurons' thresholds (4.13): the file's, those of ``posture.relative_sensors`` moved by the
-        posture's target while the posture term is on (a fall from the held lean, issue 29)."""
-        self._sensor_theta = self._sensor_theta_file.copy()
-        if self.posture_gain and len(self._relative_sensors):
-            self._sensor_theta[self._relative_sensors] += self.circuit.posture.target
-
-    def set_ankle_adaptation(self, on: bool) -> None:
-        """The ankles' centres follow the sensed slope this trial (``ankle_adaptation``; ``reset`` restores the
-        circuit's ``enabled``)."""
-        if on and self._ankles is None:
-            raise ValueError(f"ankle_adaptation: circuit {self.circuit.name} has none (circuit key `ankle_adaptation`)")
-        self.ankle_adaptation = bool(on)
-
-    def set_start_ramp(self, seconds: float) -> None:
-        """alpha_MLR grows from 0 over this trial's first ``seconds`` (0: at once); before its first tick."""
-        if not (np.isfinite(seconds) and seconds >= 0):
-            raise ValueError(f"start_ramp: expected a time in s >= 0; got {seconds!r}")
-        if self.tick:
-            raise ValueError("start_ramp: set it before the trial's first tick")
-        self.start_ramp = float(seconds)
-        self._ramp_share = 0.0 if self.start_ramp > 0 else 1.0
-        self._update_pattern_formation()
-
-    @property
-    def slope_estimate(self) -> np.ndarray:
-        """Each adapted foot's slope estimate, rad, + = uphill, (feet,) or (batch, feet); zeros before the first tick
-        or without an adaptation (issue 29)."""
-        out = self.slope_estimate_all()
-        return out if self.batched else out[0]
-
-    def slope_estimate_all(self) -> np.ndarray:
-        """``slope_estimate`` with the batch axis always."""
-        a = self._ankles
-        if a is None:
-            return np.zeros((self.batch, 0))
-        return a.estimate.copy() if a.estimate is not None else np.zeros((self.batch, len(a.joints)))
-
-    @property
-    def ankle_centre(self) -> np.ndarray:
-        """Each adapted ankle's centre shift (added to its theta_0), rad, (feet,) or (batch, feet)."""
-        out = self.ankle_centre_all()
-        return out if self.batched else out[0]
-
-    def ankle_centre_all(self) -> np.ndarray:
-        """``ankle_centre`` with the batch axis always."""
-        a = self._ankles
-        return a.centre.copy() if a is not None else np.zeros((self.batch, 0))
-
-    @property
-    def posture_shift(self) -> np.ndarray:
-        """The posture term's accumulated shift of its joints' theta_0, rad, in ``posture.joints`` order ((batch, n)
-        when batched); empty without a posture."""
-        return self._posture_shift.copy() if self.batched else self._posture_shift[0].copy()
-
-    #: what ``arm_terrain_switch`` takes
-    TERRAIN_SWITCH_MODES = ("at_once", "gradual")
-    TERRAIN_SWITCH_WHEN = ("above", "below", "outside")
-
-    def arm_terrain_switch(
-        self,
-        input: str,
-        threshold: float | None,
-        when: str,
-        mode: str = "at_once",
-        seconds: float = 0.0,
-        after: float = 0.0,
-        gains: dict[str, float] | None = None,
-        sigma_s: float | None = None,
-        sigma_joints: list[str] | None = None,
-        band: tuple[float, float] | None = None,
-        theta_mlr: float | None = None,
-        detector: str = "torso",
-    ) -> None:
-        """Switch parameters once this trial when the terrain changes (§5.8, L1759-1766): from ``after`` s on, the first
-        tick whose ``input`` (e.g. the torso pitch, rad) is at or ``when`` ("above", "below") ``threshold`` starts
-        moving the group gain multipliers ``gains`` (group -> new value) and the RG's sigma_s of ``sigma_joints``
-        (default all; None: unchanged) from their values at that tick to the new ones: ``mode`` "at_once" in that
-        tick, "gradual" linearly over ``seconds`` (the thesis's "switching occurs gradually", L1766). Per batch copy.
-        ``band`` = (k, seconds) instead of a ``threshold``: the threshold is measured on the walk itself, the input's
-        mean +- k x its half range (- below, + above, either for "outside") over ``seconds`` from ``after`` (digest
-        §7.17's rule, "defined with taking into account the oscillation range of the torso", L1759), and detection
-        starts once it is known.
-        ``theta_mlr`` (None: unchanged) moves the descending theta_MLR (4.9) of ``sigma_joints`` the same way.
-        ``detector`` (terrain.py ``DETECTORS``): what is watched, ``input`` itself ("torso", the thesis's) or another
-        sensed signal (issue 29), whose band is measured the same way; "time" fires at ``after``.
-        ``reset`` disarms it; the switches are in ``terrain_switch_events``."""
-        if input not in self.circuit.inputs:
-            raise ValueError(
-                f"terrain switch input: expected one of the inputs of circuit {self.circuit.name} "
-                f"{self.circuit.inputs}; got {input!r}"
-            )
-        if when not in self.TERRAIN_SWITCH_WHEN:
-            raise ValueError(f"switch_when: expected one of {list(self.TERRAIN_SWITCH_WHEN)}; got {when!r}")
-        if mode not in self.TERRAIN_SWITCH_MODES:
-            raise ValueError(f"terrain_switch: expected one of {list(self.TERRAIN_SWITCH_MODES)}; got {mode!r}")
-        if mode == "gradual" and not seconds > 0:
-            raise ValueError(f"switch_seconds: expected a duration in s > 0 for a gradual switch; got {seconds!r}")
-        for group in gains or {}:
-            if group not in self.gain_groups:
-                raise ValueError(
-                    f"next_gain_{group}: expected a gain group of circuit {self.circuit.name} (gain_groups "
-                    f"{list(self.gain_groups)}); it has no {group!r}"
-                )
-        if band is not None and not (band[0] >= 0 and band[1] > 0):
-            raise ValueError(f"switch_band: expected (k >= 0, seconds > 0); got {band!r}")
-        if detector not in DETECTORS:
-            raise ValueError(f"switch_detector: expected one of {list(DETECTORS)}; got {detector!r}")
-        if detector == "time":
-            band, threshold = None, 0.0
-        elif band is None and threshold is None:
-            raise ValueError("terrain switch: expected a threshold, or a band to measure it by")
-        if detector not in ("torso", "time") and band is None:
-            raise ValueError(f"switch_detector {detector!r}: expected a band (switch_band) measured on the walk")
-        if when == "outside" and band is None and detector != "time":
-            raise ValueError("switch_when 'outside': expected a band (switch_band) to leave; got a threshold")
-        watch = Watch(make_detector(self, detector, input), when, after, band=band, threshold=threshold)
-        self._terrain = TerrainSwitch(self, watch, input, mode, seconds, gains or {}, sigma_s, sigma_joints, theta_mlr)
-        self._terrain_detector = detector
-        self.terrain_threshold = self._terrain.threshold()  # a given threshold: known from the start
-
-    def watch_terrain(self, detectors, band: tuple[float, float], after: float, torso_input: str = "torso_pitch"):
-        """Watch ``detectors`` (terrain.py ``DETECTORS``) this trial without switching: each measures its band (k,
-        seconds) from ``after`` s and records when it first leaves it (``detector_events``), to compare detectors on
-        the same walk (issue 29). ``reset`` stops watching."""
-        watches = [Watch(make_detector(self, name, torso_input), "outside", after, band=band) for name in detectors]
-        self._watcher = Watcher(watches) if watches else None
-
-    @property
-    def terrain_detector(self) -> str | None:
-        """What the armed (or fired) terrain switch watches this trial (terrain.py ``DETECTORS``), or None."""
-        return self._terrain_detector
-
-    @property
-    def detector_events(self) -> list:
-        """The watched detectors' firings this trial (``watch_terrain``), in order."""
-        return self._watcher.events if self._watcher is not None else []
-
-    @property
-    def terrain_switch_jumps(self) -> list[tuple[float, float]]:
-        """(time s, rad) for every tick the terrain switch moved parameters: the largest change of any joint's command
-        the switch itself made in that tick (the state held; continuity of the switch, issue 29)."""
-        return list(self._switch_jumps)
 
     def set_descending(self, alpha_mlr=None, theta_mlr=None, joints: list[str] | None = None) -> None:
         """Descending (MLR) control of the named joints' PF neurons (4.9); theta_MLR with the signs of §7.6."""
@@ -543,44 +300,6 @@ class CPGNetwork:
                 self.coupling[2 * one : 2 * one + 2, 2 * other : 2 * other + 2] = 0.0
         self._update_coefficients()
 
-    #: what ``set_phase_reset`` takes
-    PHASE_RESET_MODES = ("off", "pulse", "state", "circuit")
-
-    def set_phase_reset(self, mode: str) -> None:
-        """How the circuit's phase resets act until the next ``reset`` (which restores "circuit"): "off" (none),
-        "pulse" or "state" (every entry acts so, each still as its ``enabled``), "circuit" (each as its file says). A
-        state reset needs every entry to store a state for each of its joints (ValueError naming those that do not)."""
-        if mode not in self.PHASE_RESET_MODES:
-            raise ValueError(f"phase_reset: expected one of {list(self.PHASE_RESET_MODES)}; got {mode!r}")
-        resets = self.circuit.phase_resets
-        problem = self.circuit.state_reset_problem() if mode == "state" else ""
-        if problem:
-            raise ValueError(f"phase_reset: {problem}")
-        self.phase_reset_enabled = np.array([r.enabled and mode != "off" for r in resets], dtype=bool)
-        as_state = [r.mode == "state" if mode == "circuit" else mode == "state" for r in resets]
-        self.phase_reset_as_state = np.array(as_state, dtype=bool)
-
-    def arm_switches(self, indices) -> None:
-        """Arm only the circuit's switches ``indices`` (of ``circuit.switches``) for this trial (``reset`` arms those
-        marked ``armed`` again): how a controller chooses one of its presets per trial, or none."""
-        chosen = sorted({int(i) for i in indices})
-        for i in chosen:
-            if not 0 <= i < len(self.circuit.switches):
-                raise ValueError(f"switch index {i}: expected one below {len(self.circuit.switches)}")
-        self._pending_switches = [i for i in chosen if not self._switched[:, i].all()]
-
-    def set_start_slope(self, slope: float) -> None:
-        """This trial starts on ground sloping ``slope`` rad (uphill +): at its first tick the circuit's ``start_slope``
-        joints command their calibrated start pose shifted by it (``reset`` forgets it)."""
-        self._start_slope = float(slope)
-
-    def set_switch_time(self, at: float) -> None:
-        """Fire this trial's armed time-triggered switches at ``at`` s instead of their ``at`` (``reset`` restores it):
-        how a trial puts a switch where its push is (E4.4, E4.7)."""
-        for n in self._pending_switches:
-            if self.circuit.switches[n].at is not None:
-                self._switch_at[n] = float(at)
-
     def _joint_indices(self, joints: list[str] | None) -> np.ndarray:
         if joints is None:
             return np.arange(self.n_joints)
@@ -599,34 +318,15 @@ class CPGNetwork:
         self._pulse_amplitude = np.zeros((b, self.n_joints))
         self._pulse_remaining = np.zeros((b, self.n_joints))
         self._pulsing = False  # some pulse has time left
-        self._reset_trigger.reset()
-        #: the phase resets so far (§7.10), in order
-        self.phase_reset_events: list[PhaseResetEvent] = []
-        self._previous_phi = None
-        self._switched = np.zeros((b, len(self.circuit.switches)), dtype=bool)
-        # (copies, joint, angle) whose theta_0 is set at the end of the tick: continuous switches, start_from_pose
-        self._hold_at_switch: list[tuple[np.ndarray, int, np.ndarray]] = []
-        self._pending_switches = [i for i, s in enumerate(self.circuit.switches) if s.armed]
-        self._switch_at: dict[int, float] = {}  # switch index -> this trial's time for its trigger `at`
-        self._start_slope: float | None = None  # rad: the slope this trial starts on, if a trial says (set_start_slope)
-        #: the pattern switches so far (§7.11), in order
-        self.switch_events: list[SwitchEvent] = []
-        posture = self.circuit.posture
-        self._posture_shift = np.zeros((b, 0 if posture is None else len(posture.joints)))  # rad, L1764
-        self._terrain: TerrainSwitch | None = None  # an armed terrain switch (§5.8), until it has done its work
-        self._watcher: Watcher | None = None  # detectors watched without switching (watch_terrain)
-        self._terrain_detector: str | None = None
-        self._switch_jumps: list[tuple[float, float]] = []
-        if self._ankles is not None:
-            self._ankles.reset()
-        # the posture input's last window of values (posture.window; allocated at its first tick), a running sum
-        self._posture_values: np.ndarray | None = None
-        self._posture_sum, self._posture_count = np.zeros(b), 0
-        self._rest_drive: np.ndarray | None = None  # MN_E - MN_F at rest on the first frame (set_gain_multiplier)
-        #: the terrain switches so far (§5.8): at most one per copy and trial
-        self.terrain_switch_events: list[TerrainSwitchEvent] = []
-        #: the armed terrain switch's threshold once known (given, or measured on the walk), kept after it fired
-        self.terrain_threshold: TerrainThreshold | None = None
+        self._reset_gains()
+        self._reset_posture()
+        self._reset_ankles()
+        self._reset_phase_resets()
+        self._reset_switches()
+        self._reset_trial_start()
+        self._reset_terrain()
+        self._update_coefficients()
+        self._update_pattern_formation()
         ns = len(self.sensor_names)
         self._sensory = np.zeros((b, ns))
         self._pf = np.zeros((b, self.n_neurons))
@@ -756,14 +456,7 @@ class CPGNetwork:
         if self._pending_switches:
             self._switches(phi, control_dt)
         if self._terrain is not None:
-            terrain = self._terrain
-            if terrain.tick(phi, self.time, control_dt):
-                self._terrain = None  # every copy has switched and arrived: nothing more per tick
-            if self.terrain_threshold is None:  # measured on the walk: known from the window's last tick on
-                self.terrain_threshold = terrain.threshold()
-            if terrain.jumps:
-                self._switch_jumps.extend(terrain.jumps)
-                terrain.jumps.clear()
+            self._terrain_tick(phi, control_dt)
         if self._watcher is not None:
             self._watcher.tick(phi, self.time, control_dt)
         self._constant = self._per_tick_constant()
@@ -776,9 +469,8 @@ class CPGNetwork:
         if self._pulsing:
             self._pulse_remaining -= control_dt
             self._pulsing = bool(np.any(self._pulse_remaining > 1e-9))
-        if self._ramp_share < 1.0:  # the circuit's start_ramp: alpha_MLR's share of the way at the tick's end
-            self._ramp_share = min(1.0, self.time / self.start_ramp)
-            self._update_pattern_formation()
+        if self._ramp_share < 1.0:
+            self._ramp_tick()
         self._outputs(rho)
         if self._hold_at_switch:
             self._hold_commands()
@@ -809,15 +501,20 @@ class CPGNetwork:
                 float(self.mn_theta),
             )
             return
-        n = self.n_neurons
-        drive = rho @ self._w_sensory  # sum_j w_j S_j of (4.10) in [:, :n], of (4.12) in [:, n:]
         rg = self.y[:, 0]
         if self._pf_bounded:  # the RG's bounded output tanh(V / A_f) (circuit ``pf_input: bounded``)
             rg = np.tanh(rg / self.A_f)
+        self._pf, self._mn = self._static_layers(rho, rg)
+
+    def _static_layers(self, rho: np.ndarray, rg) -> tuple[np.ndarray, np.ndarray]:
+        """PF and MN, (batch, neurons), from what the PF reads of its RG (``rg``: V, or tanh(V / A_f)) and the sensory
+        neurons ``rho``."""
+        n = self.n_neurons
+        drive = rho @ self._w_sensory  # sum_j w_j S_j of (4.10) in [:, :n], of (4.12) in [:, n:]
         I_pf = (self._w_rg2pf * rg + drive[:, :n]) / self._pf_divisor  # (4.10) L1110
-        self._pf = _logistic(self._pf_half_slope, I_pf - self._pf_centre)  # (4.9) L1108
-        I_mn = (self._w_pf2mn * self._pf + drive[:, n:]) / self._mn_divisor  # (4.12) L1125
-        self._mn = _logistic(self._mn_half_slope, I_mn - self.mn_theta)  # (4.11) L1123
+        pf = _logistic(self._pf_half_slope, I_pf - self._pf_centre)  # (4.9) L1108
+        I_mn = (self._w_pf2mn * pf + drive[:, n:]) / self._mn_divisor  # (4.12) L1125
+        return pf, _logistic(self._mn_half_slope, I_mn - self.mn_theta)  # (4.11) L1123
 
     def _per_tick_constant(self) -> np.ndarray | None:
         """The constant terms of dy/dt over this tick, (batch, 2 neurons) = [i_ext / tau_m, -sigma_s E_s / tau_s], or
@@ -841,209 +538,6 @@ class CPGNetwork:
         constant[:, n:] = slow
         return constant
 
-    def _phase_resets(self, rho: np.ndarray) -> None:
-        """§7.10 (L1270-1282): a sensory neuron rising through its threshold (``ResetTrigger``: once per landing, not
-        in the start-up transient) starts a pulse into its joint's RG, or sets its joints' RGs to the stance-onset
-        state (V, q) the entry stores (``phase_reset_as_state``): a reset of the phase, wherever the rhythm was."""
-        if not self._resets:
-            return
-        sensor, joint, amplitude, duration, _ = self._reset_arrays
-        fired = self._reset_trigger(rho[:, sensor], self.time, self.phase_reset_enabled)
-        if fired is None:
-            return
-        for n in np.flatnonzero(fired.any(axis=0)):
-            copies = fired[:, n]
-            if self.phase_reset_as_state[n]:
-                cols, V, q = self._reset_states[n]
-                rows = np.flatnonzero(copies)[:, None]
-                self.y[rows, 0, cols] = V
-                self.y[rows, 1, cols] = q
-            else:
-                self._pulse_amplitude[copies, joint[n]] = amplitude[n]
-                self._pulse_remaining[copies, joint[n]] = duration[n]
-                self._pulsing = True
-            mode = "state" if self.phase_reset_as_state[n] else "pulse"
-            self.phase_reset_events.append(PhaseResetEvent(self.time, int(n), mode, copies.copy()))
-
-    def _first_tick(self, phi: np.ndarray, rho: np.ndarray) -> None:
-        """A trial's first tick: ``start_from_pose`` (the named joints' command starts at the measured pose),
-        ``start_slope`` (the named joints' command starts at their calibrated pose shifted by the slope), and the
-        motor neurons' drive at rest on this frame, which the group gain multipliers scale the drive about."""
-        every = np.ones(self.batch, dtype=bool)
-        if self._start_from_pose:
-            self._hold_at_switch.extend((every, j, phi[:, source].copy()) for j, source in self._start_from_pose)
-        if self._start_slope is not None:  # circuit start_slope: the calibrated start pose shifted by the slope
-            slope = self._start_slope
-            self._hold_at_switch.extend(
-                (every, j, np.full(self.batch, pose0 + k * slope)) for j, pose0, k in self._start_slope_joints
-            )
-        if self.gain_groups and self.circuit.command == "position":
-            self._rest_drive = self._drive_at_rest(rho)
-            self.theta0 += (self._circuit_gain - self._gain) * self._rest_drive  # multipliers set before the trial
-
-    def _drive_at_rest(self, rho: np.ndarray) -> np.ndarray:
-        """MN_E - MN_F per joint, (batch, joints), with every RG at rest (V = 0) and the sensory neurons ``rho``: what
-        the reflexes alone make the motor neurons say, as (4.9)-(4.12) in ``_outputs`` with the RG term 0."""
-        n = self.n_neurons
-        drive = rho @ self._w_sensory
-        pf = _logistic(self._pf_half_slope, drive[:, :n] / self._pf_divisor - self._pf_centre)  # (4.10), (4.9)
-        mn = _logistic(self._mn_half_slope, (self._w_pf2mn * pf + drive[:, n:]) / self._mn_divisor - self.mn_theta)
-        return mn[:, E::2] - mn[:, F::2]
-
-    def _posture(self, phi: np.ndarray, control_dt: float) -> None:
-        """The torso held near its target (L1764, §7.18; circuit ``posture``): each of the posture's joints' theta_0
-        moves by gain sign (input - target) dt this tick, its accumulated shift kept within +-limit."""
-        posture, old = self.circuit.posture, self._posture_shift
-        value = phi[:, self._posture_input]
-        if posture.window > 0:  # the input's mean over the last window (one gait cycle: its swing averages out)
-            if self._posture_values is None:
-                self._posture_values = np.zeros((self.batch, max(1, int(round(posture.window / control_dt)))))
-            n = self._posture_values.shape[1]
-            slot = self.tick % n
-            self._posture_sum += value - self._posture_values[:, slot]
-            self._posture_values[:, slot] = value
-            self._posture_count = min(self._posture_count + 1, n)
-            value = self._posture_sum / self._posture_count
-        lean = value - posture.target  # rad, + = past the target in the input's + direction
-        shift = old + np.multiply.outer(lean * (self.posture_gain * control_dt), self._posture_signs)
-        np.minimum(np.maximum(shift, -posture.limit, out=shift), posture.limit, out=shift)  # np.clip, cheaper
-        self.theta0[:, self._posture_joints] += shift - old
-        self._posture_shift = shift
-
-    def _hold_commands(self) -> None:
-        """A continuous switch's last part: theta_0 := angle - G (MN_E - MN_F) with this tick's MN, so that the command
-        equals the angle measured at the switch."""
-        mn = self._mn
-        for mask, j, angle in self._hold_at_switch:
-            drive = self._gain[mask, j] * (mn[mask, 2 * j + E] - mn[mask, 2 * j + F])
-            self.theta0[mask, j] = angle - drive
-        self._hold_at_switch.clear()
-
-    def _switches(self, phi: np.ndarray, control_dt: float) -> None:
-        """The circuit's pattern switches (§7.11) whose trigger fires this tick: time ``at``, input level ``above``, or
-        input rate ``rate_above`` (the change since the last tick over ``control_dt``; none on the first tick)."""
-        for n in list(self._pending_switches):
-            s, i = self.circuit.switches[n], self._switch_input[n]
-            if s.at is not None:
-                at = self._switch_at.get(n, s.at)  # a trial may move a time trigger (set_switch_time)
-                due = np.full(self.batch, at - 1e-9 <= self.time)
-            elif s.rate_above is not None:
-                if self._previous_phi is None:
-                    continue
-                due = (phi[:, i] - self._previous_phi[:, i]) / control_dt > s.rate_above
-            else:
-                due = phi[:, i] > s.above
-            due &= ~self._switched[:, n]
-            if due.any():
-                self._switched[due, n] = True
-                patterns = {name: (rg.sigma_s, rg.sigma_f) for name, rg in s.joints.items()}
-                kicks = {name: s.joint_kicks.get(name, s.kick) for name in s.joints}
-                rates = {}
-                if s.kick_direction == "motion":
-                    kicks, rates = self._kicks_by_motion(kicks, phi, control_dt)
-                self.switch_pattern(
-                    patterns,
-                    kick=kicks,
-                    duration=s.kick_duration,
-                    sensors=phi,
-                    where=due,
-                    inhibit=s.inhibit,
-                    continuous=s.theta0 == "continuous",
-                    name=s.name,
-                    extension_rates=rates,
-                )
-                if self._switched[:, n].all():
-                    self._pending_switches.remove(n)
-        self._previous_phi = phi.copy()
-
-    def _kicks_by_motion(self, kicks: dict[str, float], phi: np.ndarray, control_dt: float) -> tuple[dict, dict]:
-        """``kick_direction: motion`` (issue 23's reading of E4.4: each joint kicked in the direction it is moving; the
-        switch's direction is the injected current's, L1437): each joint's kick keeps its magnitude, its sign pushes
-        the joint further the way it moves. Its rate toward extension is sign(G) d angle / dt over the last
-        tick (G > 0 where + rotation is extension; the angle_input's change over ``control_dt``); a kick of +I goes
-        into RG-F (§5's convention), so a joint moving toward extension gets -|kick|, one moving toward flexion
-        +|kick|, one not moving (or on the trial's first tick, no rate yet) its kick as given. Returns the kicks per
-        batch copy and the rates."""
-        out, rates = {}, {}
-        for name, kick in kicks.items():
-            j = self.circuit.joint_index(name)
-            source = self._angle_input[j]
-            if self._previous_phi is None:
-                rate = np.zeros(self.batch)
-            else:
-                rate = np.sign(self._gain[:, j]) * (phi[:, source] - self._previous_phi[:, source]) / control_dt
-            out[name] = np.where(rate > 0, -abs(kick), np.where(rate < 0, abs(kick), kick))
-            rates[name] = rate
-        return out, rates
-
-    def switch_pattern(
-        self,
-        patterns: dict[str, tuple[float, float]],
-        kick: float | dict[str, float] = 1.0,
-        duration: float = 0.2,
-        sensors=None,
-        where=None,
-        inhibit=(),
-        continuous: bool = True,
-        name: str | None = None,
-        extension_rates: dict | None = None,
-    ) -> None:
-        """§7.11: set each named joint's (sigma_s, sigma_f), reset its V = q = 0 (the author's later method, digest
-        §5), and inject +kick into RG-F / -kick into RG-E for ``duration`` s; ``kick`` is one number or one per joint
-        (its sign the direction of that joint's switch, L1437; a joint's value may be an array over the batch copies).
-        ``inhibit``: joint pairs whose couplings are silenced (L1311; all copies, so ``where`` must then select all or
-        none). ``where``: boolean mask of the batch copies to switch (default all).
-
-        A position-commanded joint's theta_0 (if it names ``angle_input`` and ``sensors`` are given): ``continuous``
-        (the default) sets theta_0 := angle - G (MN_E - MN_F) at the end of this tick, so the command equals the
-        measured angle (the joint goes on from where it is); ``continuous=False`` sets theta_0 := the measured angle,
-        the rule of the author's 2017 scripts (digest §5, last bullet; not the thesis's), whose circuit has its
-        reflexes off: here the command then jumps by the offset the joint's reflexes held. Recorded in
-        ``switch_events`` (with ``name`` and the ``extension_rates`` a motion-directed kick used)."""
-        mask = np.ones(self.batch, dtype=bool) if where is None else np.asarray(where, dtype=bool)
-        kicks = kick if isinstance(kick, dict) else dict.fromkeys(patterns, kick)
-        if inhibit and not mask.all():
-            raise ValueError("inhibiting couplings in some batch copies only: the copies share one coupling matrix")
-        for joint, (sigma_s, sigma_f) in patterns.items():
-            j = self.circuit.joint_index(joint)
-            cols = [2 * j + E, 2 * j + F]
-            for array, value in ((self.sigma_s, sigma_s), (self.sigma_f, sigma_f)):
-                array[np.ix_(mask, cols)] = value
-            self.sigma_in[np.ix_(mask, cols)] = sigma_s
-            self.sigma_out[np.ix_(mask, cols)] = sigma_s
-            self.y[np.ix_(mask, [0, 1], cols)] = 0.0
-            self._pulse_amplitude[mask, j] = np.broadcast_to(kicks.get(joint, 0.0), (self.batch,))[mask]
-            self._pulse_remaining[mask, j] = duration
-            self._pulsing = True
-            source = self._angle_input[j]
-            if sensors is not None and source is not None and self.circuit.command == "position":
-                phi = np.broadcast_to(sensors, (self.batch, len(self.circuit.inputs)))
-                self.theta0[mask, j] = phi[mask, source]
-                if continuous:
-                    self._hold_at_switch.append((mask.copy(), j, phi[mask, source].copy()))
-        if inhibit:
-            self.inhibit_couplings(inhibit)
-        else:
-            self._update_coefficients()
-
-        def per_copy(value) -> float | np.ndarray:  # one number, or the switched copies' when they differ
-            switched = np.broadcast_to(np.asarray(value, dtype=float), (self.batch,))[mask]
-            return float(switched[0]) if np.all(switched == switched[0]) else switched.copy()
-
-        rates = extension_rates or {}
-        self.switch_events.append(
-            SwitchEvent(
-                time=self.time,
-                patterns={joint: (float(s), float(f)) for joint, (s, f) in patterns.items()},
-                kicks={joint: per_copy(kicks.get(joint, 0.0)) for joint in patterns},
-                inhibited=tuple(tuple(pair) for pair in inhibit),
-                copies=mask.copy(),
-                name=name,
-                kick_direction="motion" if rates else "fixed",
-                extension_rates={joint: per_copy(rate) for joint, rate in rates.items()},
-            )
-        )
-
     # ---------------------------------------------------------------- outputs
 
     def command_all(self) -> np.ndarray:
@@ -1058,7 +552,7 @@ class CPGNetwork:
         voltage: (3.6) L874 V = M (G_E U_E + G_F U_F), with G_E = +1, G_F = -1 (as the reflexive controller of
         ch. 3) and M = the joint's gain, in V; position: theta_0 + G (MN_E - MN_F) in rad (author's code, digest
         §5 and §7.8)."""
-        mn = self._mn
+        mn = self._mn  # command_all's lines, not a call to it: one call less per tick (about 0.3% of a planar tick)
         drive = self._gain * (mn[:, E::2] - mn[:, F::2])
         out = drive if self.circuit.command == "voltage" else self.theta0 + drive
         return out if self.batched else out[0]

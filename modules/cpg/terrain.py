@@ -27,6 +27,7 @@ The **terrain switch** (``TerrainSwitch``) watches one detector and, when it fir
 sigma_s and theta_MLR from their values then to the new condition's, at once or linearly over ``seconds``. Watches
 without a switch (``CPGNetwork.watch_terrain``) only record when they would have fired, to compare detectors on the
 same walks. Everything here is per batch copy and pure numpy; the network calls it once per control tick.
+``TerrainSwitching`` is this seam's part of ``CPGNetwork`` (network.py): arming, ticking and reading it.
 """
 
 from __future__ import annotations
@@ -34,6 +35,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from .events import per_copy
 
 E, F = 0, 1
 
@@ -100,12 +103,6 @@ class DetectorEvent:
     low: float | np.ndarray
     high: float | np.ndarray
     copies: np.ndarray
-
-
-def per_copy(values) -> float | np.ndarray:
-    """One number when every copy has the same, else the array."""
-    values = np.asarray(values, dtype=float)
-    return float(values.flat[0]) if np.all(values == values.flat[0]) else values.copy()
 
 
 class Detector:
@@ -442,3 +439,120 @@ class Watcher:
             self.events.append(
                 DetectorEvent(w.detector.name, time, per_copy(value), per_copy(low), per_copy(high), due.copy())
             )
+
+
+class TerrainSwitching:
+    """``CPGNetwork``'s terrain switch (§5.8) and watched detectors: arming them per trial, and reading them."""
+
+    def _reset_terrain(self) -> None:
+        """A trial's start: no terrain switch armed, no detector watched."""
+        self._terrain: TerrainSwitch | None = None  # an armed terrain switch (§5.8), until it has done its work
+        self._watcher: Watcher | None = None  # detectors watched without switching (watch_terrain)
+        self._terrain_detector: str | None = None
+        self._switch_jumps: list[tuple[float, float]] = []
+        #: the terrain switches so far (§5.8): at most one per copy and trial
+        self.terrain_switch_events: list[TerrainSwitchEvent] = []
+        #: the armed terrain switch's threshold once known (given, or measured on the walk), kept after it fired
+        self.terrain_threshold: TerrainThreshold | None = None
+
+    def _terrain_tick(self, phi: np.ndarray, control_dt: float) -> None:
+        """The armed terrain switch's tick (``TerrainSwitch.tick``): its threshold once known, the jumps it made."""
+        terrain = self._terrain
+        if terrain.tick(phi, self.time, control_dt):
+            self._terrain = None  # every copy has switched and arrived: nothing more per tick
+        if self.terrain_threshold is None:  # measured on the walk: known from the window's last tick on
+            self.terrain_threshold = terrain.threshold()
+        if terrain.jumps:
+            self._switch_jumps.extend(terrain.jumps)
+            terrain.jumps.clear()
+
+    #: what ``arm_terrain_switch`` takes
+    TERRAIN_SWITCH_MODES = ("at_once", "gradual")
+    TERRAIN_SWITCH_WHEN = ("above", "below", "outside")
+
+    def arm_terrain_switch(
+        self,
+        input: str,
+        threshold: float | None,
+        when: str,
+        mode: str = "at_once",
+        seconds: float = 0.0,
+        after: float = 0.0,
+        gains: dict[str, float] | None = None,
+        sigma_s: float | None = None,
+        sigma_joints: list[str] | None = None,
+        band: tuple[float, float] | None = None,
+        theta_mlr: float | None = None,
+        detector: str = "torso",
+    ) -> None:
+        """Switch parameters once this trial when the terrain changes (§5.8, L1759-1766): from ``after`` s on, the first
+        tick whose ``input`` (e.g. the torso pitch, rad) is at or ``when`` ("above", "below") ``threshold`` starts
+        moving the group gain multipliers ``gains`` (group -> new value) and the RG's sigma_s of ``sigma_joints``
+        (default all; None: unchanged) from their values at that tick to the new ones: ``mode`` "at_once" in that
+        tick, "gradual" linearly over ``seconds`` (the thesis's "switching occurs gradually", L1766). Per batch copy.
+        ``band`` = (k, seconds) instead of a ``threshold``: the threshold is measured on the walk itself, the input's
+        mean +- k x its half range (- below, + above, either for "outside") over ``seconds`` from ``after`` (digest
+        §7.17's rule, "defined with taking into account the oscillation range of the torso", L1759), and detection
+        starts once it is known.
+        ``theta_mlr`` (None: unchanged) moves the descending theta_MLR (4.9) of ``sigma_joints`` the same way.
+        ``detector`` (terrain.py ``DETECTORS``): what is watched, ``input`` itself ("torso", the thesis's) or another
+        sensed signal (issue 29), whose band is measured the same way; "time" fires at ``after``.
+        ``reset`` disarms it; the switches are in ``terrain_switch_events``."""
+        band, threshold = self._check_terrain_switch(input, threshold, when, mode, seconds, gains, band, detector)
+        watch = Watch(make_detector(self, detector, input), when, after, band=band, threshold=threshold)
+        self._terrain = TerrainSwitch(self, watch, input, mode, seconds, gains or {}, sigma_s, sigma_joints, theta_mlr)
+        self._terrain_detector = detector
+        self.terrain_threshold = self._terrain.threshold()  # a given threshold: known from the start
+
+    def _check_terrain_switch(self, input, threshold, when, mode, seconds, gains, band, detector) -> tuple:
+        """``arm_terrain_switch``'s arguments checked (ValueError naming the trial parameter); returns (band,
+        threshold) as the watch takes them (none for the "time" detector)."""
+        if input not in self.circuit.inputs:
+            raise ValueError(
+                f"terrain switch input: expected one of the inputs of circuit {self.circuit.name} "
+                f"{self.circuit.inputs}; got {input!r}"
+            )
+        if when not in self.TERRAIN_SWITCH_WHEN:
+            raise ValueError(f"switch_when: expected one of {list(self.TERRAIN_SWITCH_WHEN)}; got {when!r}")
+        if mode not in self.TERRAIN_SWITCH_MODES:
+            raise ValueError(f"terrain_switch: expected one of {list(self.TERRAIN_SWITCH_MODES)}; got {mode!r}")
+        if mode == "gradual" and not seconds > 0:
+            raise ValueError(f"switch_seconds: expected a duration in s > 0 for a gradual switch; got {seconds!r}")
+        for group in gains or {}:
+            self._check_gain_group(group, f"next_gain_{group}")
+        if band is not None and not (band[0] >= 0 and band[1] > 0):
+            raise ValueError(f"switch_band: expected (k >= 0, seconds > 0); got {band!r}")
+        if detector not in DETECTORS:
+            raise ValueError(f"switch_detector: expected one of {list(DETECTORS)}; got {detector!r}")
+        if detector == "time":
+            band, threshold = None, 0.0
+        elif band is None and threshold is None:
+            raise ValueError("terrain switch: expected a threshold, or a band to measure it by")
+        if detector not in ("torso", "time") and band is None:
+            raise ValueError(f"switch_detector {detector!r}: expected a band (switch_band) measured on the walk")
+        if when == "outside" and band is None and detector != "time":
+            raise ValueError("switch_when 'outside': expected a band (switch_band) to leave; got a threshold")
+        return band, threshold
+
+    def watch_terrain(self, detectors, band: tuple[float, float], after: float, torso_input: str = "torso_pitch"):
+        """Watch ``detectors`` (terrain.py ``DETECTORS``) this trial without switching: each measures its band (k,
+        seconds) from ``after`` s and records when it first leaves it (``detector_events``), to compare detectors on
+        the same walk (issue 29). ``reset`` stops watching."""
+        watches = [Watch(make_detector(self, name, torso_input), "outside", after, band=band) for name in detectors]
+        self._watcher = Watcher(watches) if watches else None
+
+    @property
+    def terrain_detector(self) -> str | None:
+        """What the armed (or fired) terrain switch watches this trial (terrain.py ``DETECTORS``), or None."""
+        return self._terrain_detector
+
+    @property
+    def detector_events(self) -> list:
+        """The watched detectors' firings this trial (``watch_terrain``), in order."""
+        return self._watcher.events if self._watcher is not None else []
+
+    @property
+    def terrain_switch_jumps(self) -> list[tuple[float, float]]:
+        """(time s, rad) for every tick the terrain switch moved parameters: the largest change of any joint's command
+        the switch itself made in that tick (the state held; continuity of the switch, issue 29)."""
+        return list(self._switch_jumps)
