@@ -466,10 +466,11 @@ def report(run_dirs, out, k, distinct, window) -> None:
     """Write the figures (PNG) and a Markdown table of RUN_DIRS to OUT.
 
     A study folder (made by sfl study) stands for its runs, and the page starts with the study's groups compared
-    (learning curves, failures before K good gaits, a table of means with 95 % intervals)."""
+    (learning curves, failures before K good gaits, a table of means with 95 % intervals); so does a page of learn
+    runs whose scenarios differ by more than the seed (e.g. a cma run and a tpe run)."""
     from .recording.records import run_status
     from .report.report import write_report
-    from .report.study import is_study, study_runs
+    from .report.study import differ, is_study, study_runs
 
     folders, said, studies = [], {}, []
     for run_dir in run_dirs:
@@ -486,7 +487,8 @@ def report(run_dirs, out, k, distinct, window) -> None:
             sys.exit(EXIT_BAD_INPUT)
         else:
             folders.append(run_dir)
-    settings = _study_settings(k, distinct, window, said) if studies else None
+    # runs that differ by more than the seed (a cma run and a tpe run) are compared as a study's groups are
+    settings = _study_settings(k, distinct, window, said) if studies or differ(folders) else None
     if out is None:
         out = studies[0] / "report" if len(studies) == 1 and len(run_dirs) == 1 else Path("docs/results")
     for run_dir in folders:

@@ -86,7 +86,7 @@ def test_learn_run_records_everything_and_matches_in_process(tmp_path):
     assert report.returncode == 0, report.stderr
     assert (tmp_path / "report" / "run.png").stat().st_size > 10_000
     table = (tmp_path / "report" / "README.md").read_text()
-    assert "| run | completed | learn | 0.0 | 60 |" in table
+    assert "| run | completed | learn | sfl | 0.0 | 60 |" in table
     made = json.loads((out / "provenance.json").read_text())  # the report says what made the run, and when
     assert f"Runs made at `{(made['commit'] or 'no git commit')[:7]}`" in table
     platform = describe_platform(made["numeric_platform"])  # and on what its floats were computed

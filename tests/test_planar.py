@@ -3,6 +3,7 @@
 import json
 
 import numpy as np
+import pyarrow.parquet as pq
 
 from sfl_brain.bodies.planar_biped import PlanarBiped
 from sfl_brain.body import InProcessLink
@@ -148,6 +149,9 @@ def test_learning_run_end_to_end_with_processes(tmp_path):
     assert done.returncode == 0, done.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["trials"] == 12 and summary["status"] == "completed"
+    # the body's metric columns carry the units it declares (docs/records.md; issue 32 found them empty)
+    units = {f.name: f.metadata[b"unit"].decode() for f in pq.read_schema(out / "trials.parquet")}
+    assert {"m_distance": "m", "m_velocity": "m/s", "m_time": "s", "m_energy": "J"}.items() <= units.items()
     # lockstep over Zenoh gives the same trials as the same scenario in one process
     local = run_local(load(SCENARIOS / "quickstart.yaml", ["protocol.trials=12"]))
     assert stable(local) == stable(read_records(out))

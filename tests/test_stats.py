@@ -22,6 +22,35 @@ def test_a_bootstrap_interval_of_a_count_never_goes_below_zero_and_is_seeded():
     assert stats.bootstrap_mean([3, 3, 3]).low == 3 and math.isnan(stats.bootstrap_mean([4]).low)
 
 
+def test_at_three_values_or_fewer_a_bootstrap_interval_is_their_range_and_a_page_lists_them():
+    """Why a page lists the values at n <= FEW: the percentile interval is then exactly their range, not 95 %."""
+    from sfl_brain.report.study import bounded_cell
+
+    for values in ([0.2, 0.9], [0.1, 0.5, 0.7]):
+        interval = stats.bootstrap_mean(values)
+        assert (interval.low, interval.high) == pytest.approx((min(values), max(values)))
+    four = stats.bootstrap_mean([0.1, 0.5, 0.7, 0.9])
+    assert 0.1 < four.low and four.high < 0.9  # from four values on, narrower than the range
+    assert bounded_cell([0.9, 0.2], ".2f") == "0.55 (n=2: 0.20, 0.90)" and bounded_cell([4], ".1f") == "4.0 (n=1)"
+    assert bounded_cell([0.1, 0.5, 0.7, 0.9], ".2f") == f"0.55 [{four.low:.2f}, {four.high:.2f}]"
+
+
+def test_a_bootstrap_band_lies_within_its_curves_trial_by_trial_and_skips_missing_values():
+    rng = np.random.default_rng(5)
+    curves = [rng.uniform(0, 1, 40) for _ in range(5)]
+    mean, low, high = stats.bootstrap_band(curves)
+    assert mean == pytest.approx(np.mean(curves, axis=0))
+    assert np.all(np.min(curves, axis=0) <= low) and np.all(low <= mean) and np.all(mean <= high)
+    assert np.all(high <= np.max(curves, axis=0))
+    for t in (0, 17, 39):  # each trial's band is that trial's bootstrap interval of the mean
+        interval = stats.bootstrap_mean([c[t] for c in curves])
+        assert (low[t], high[t]) == pytest.approx((interval.low, interval.high), abs=0.03)
+    # the trials every curve has; a nan (no value yet) left out of that trial; one value: no band
+    mean, low, high = stats.bootstrap_band([np.array([np.nan, 1.0, 2.0, 9.0]), np.array([0.0, 3.0, 4.0])])
+    assert len(mean) == 3 and mean[0] == 0.0 and np.isnan(low[0]) and np.isnan(high[0])
+    assert (mean[1], low[1], high[1]) == (2.0, 1.0, 3.0)  # two values: their range
+
+
 def test_the_paired_log_t_test_is_scipy_s_on_the_log_scale_and_its_ratio_is_positive():
     plain = [40, 61, 22, 35, 55]
     gated = [10, 14, 7, 9, 12]

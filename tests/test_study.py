@@ -10,12 +10,26 @@ import sys
 from datetime import datetime
 from pathlib import Path
 
+import matplotlib.pyplot as plt
 import numpy as np
 import psutil
 import pytest
-from scipy import stats
 
-from sfl_brain.report.study import band, group_runs, moving_success_rate, short_names, t_interval, varied_keys
+from sfl_brain.report.report import write_report
+from sfl_brain.report.stats import bootstrap_band
+from sfl_brain.report.study import (
+    BAND_ALPHA,
+    StudySettings,
+    curves_figure,
+    differ,
+    failures_figure,
+    group_runs,
+    learn_runs,
+    moving_success_rate,
+    run_metrics,
+    short_names,
+    varied_keys,
+)
 from sfl_brain.status import BadInput
 from sfl_brain.study.study import TrialCounter, core_slots, first_difference, parse_seeds, parse_vary
 
@@ -25,33 +39,6 @@ LEARN = SCENARIOS / "analytic_learn.yaml"
 
 
 # --------------------------------------------------------------------------- the maths
-def test_t_interval_is_the_two_sided_95_percent_t_interval_of_the_mean():
-    mean, half, n = t_interval([1.0, 2.0, 3.0, 4.0])
-    assert (mean, n) == (2.5, 4)
-    assert half == pytest.approx(3.182446 * np.std([1, 2, 3, 4], ddof=1) / 2, rel=1e-6)  # t(0.975, 3) = 3.1824
-    assert t_interval([5.0, None, float("nan")])[:2] == (5.0, pytest.approx(float("nan"), nan_ok=True))
-    assert t_interval([])[2] == 0
-
-
-def test_t_interval_covers_the_true_mean_95_times_in_100():
-    rng = np.random.default_rng(3)
-    covered = 0
-    for _ in range(2000):
-        mean, half, _ = t_interval(rng.normal(10.0, 2.0, size=3))
-        covered += abs(mean - 10.0) <= half
-    assert covered / 2000 == pytest.approx(0.95, abs=0.015)
-
-
-def test_band_is_the_trial_by_trial_interval_over_the_seeds_that_have_a_value():
-    curves = [np.array([np.nan, 1.0, 2.0, 9.0]), np.array([0.0, 3.0, 4.0]), np.array([np.nan, 5.0, 6.0])]
-    mean, lo, hi = band(curves)
-    assert len(mean) == 3  # the trials every seed has
-    assert mean[0] == 0.0 and np.isnan(lo[0]) and np.isnan(hi[0])  # one value: no interval
-    assert mean[1] == 3.0
-    half = stats.t.ppf(0.975, 2) * 2.0 / np.sqrt(3)
-    assert hi[1] - mean[1] == pytest.approx(half) and mean[1] - lo[1] == pytest.approx(half)
-
-
 def test_success_rate_over_a_moving_window_of_trials():
     assert moving_success_rate([1, 0, 1, 1, 0], 2).tolist() == [1.0, 0.5, 0.5, 1.0, 0.5]
     assert moving_success_rate([1, 0, 1], 10).tolist() == pytest.approx([1.0, 0.5, 2 / 3])
@@ -192,10 +179,11 @@ def test_study_with_jobs_runs_at_once_reports_the_groups_and_never_runs_a_comple
     assert "failures before K=2" in page and "success rate, last 10 trials" in page
 
 
-def test_a_study_of_two_proposers_over_two_seeds_compares_them(tmp_path):
-    """Issue 22's study, small: success-failure learning against CMA-ES, two seeds each, over processes; each run
-    records its proposer and its safe-learning metrics, and the report compares the two groups."""
-    out = tmp_path / "study"
+@pytest.fixture(scope="module")
+def proposer_study(tmp_path_factory) -> Path:
+    """Issue 22's study, small: success-failure learning against CMA-ES, two seeds each, over processes (the study
+    folder; its report written with K = 3). Shared by the tests of what a page says at n = 2."""
+    out = tmp_path_factory.mktemp("proposers") / "study"
     done = sfl(
         "study",
         str(LEARN),
@@ -215,6 +203,25 @@ def test_a_study_of_two_proposers_over_two_seeds_compares_them(tmp_path):
         timeout=240,
     )
     assert done.returncode == 0, done.stderr
+    return out
+
+
+RUNS = ("kindsfl_seed0", "kindsfl_seed1", "kindcma_seed0", "kindcma_seed1")
+
+
+def _groups(study: Path, settings: StudySettings) -> dict[str, list]:
+    """The study's groups of completed runs, as its page draws them."""
+    scenarios, folders = learn_runs([study / name for name in RUNS])
+    return {label: [run_metrics(folders[n], settings) for n in names] for label, names in group_runs(scenarios).items()}
+
+
+def _summary(study: Path, name: str) -> dict:
+    return json.loads((study / name / "summary.json").read_text())
+
+
+def test_a_study_of_two_proposers_over_two_seeds_compares_them(proposer_study):
+    """Each run records its proposer and its safe-learning metrics, and the report compares the two groups."""
+    out = proposer_study
     for kind in ("sfl", "cma"):
         for seed in (0, 1):
             summary = json.loads((out / f"kind{kind}_seed{seed}" / "summary.json").read_text())
@@ -226,6 +233,95 @@ def test_a_study_of_two_proposers_over_two_seeds_compares_them(tmp_path):
     page = (out / "report" / "README.md").read_text()
     assert "| kind=sfl | 2 |" in page and "| kind=cma | 2 |" in page
     assert "failures, all trials" in page
+
+
+def test_at_two_seeds_every_number_stays_in_its_possible_range_and_says_its_n(proposer_study):
+    """Issue 32: "success rate 0.45 +- 4". With two seeds a t half-width is 12.7 standard errors, wider than a rate
+    can be; the page and study_summary.json give the mean with the seeds' own values (n shown) and bounds within
+    what the values can be."""
+    page = (proposer_study / "report" / "README.md").read_text()
+    numbers = json.loads((proposer_study / "report" / "study_summary.json").read_text())
+    for label in ("kind=sfl", "kind=cma"):
+        group = numbers["groups"][label]
+        for key in ("success_rate", "success_rate_last_window"):
+            rate = group[key]
+            assert rate["n"] == 2 and rate["interval"] == "range"
+            assert 0.0 <= rate["low"] <= rate["mean"] <= rate["high"] <= 1.0
+        failures = group["failures_before_first_success"]
+        summaries = [_summary(proposer_study, name) for name in group["runs"]]
+        firsts = [x["safe_learning"]["failures_before_first_success"] for x in summaries]
+        assert failures["n"] == sum(f is not None for f in firsts)  # the runs that had a first success
+        assert failures["n"] < 2 or 0 <= failures["low"] <= failures["mean"] <= failures["high"]
+        (row,) = [line for line in page.splitlines() if line.startswith(f"| {label} | 2 |")]
+        rates = sorted(x["success_rate"] for x in summaries)
+        assert f"(n=2: {rates[0]:.2f}, {rates[1]:.2f})" in row  # the seeds' own values, not a 95 % claim
+        assert "±" not in row and "+-" not in row
+
+
+def test_bands_of_two_seeds_stay_within_them_and_do_not_hide_each_other(proposer_study):
+    """Issue 32: with n = 2 a t-band covered the whole plot and the second band hid the first. A bootstrap band lies
+    within its seeds' curves, trial by trial; fills are light and every band's dashed edges are drawn above every
+    fill."""
+    settings = StudySettings(k=3)
+    groups = _groups(proposer_study, settings)
+    for runs in groups.values():
+        curves = [moving_success_rate(r.success, settings.window) for r in runs]
+        mean, low, high = bootstrap_band(curves)
+        assert np.all(low >= np.min(curves, axis=0) - 1e-12) and np.all(high <= np.max(curves, axis=0) + 1e-12)
+        assert np.allclose(low, np.min(curves, axis=0)) and np.allclose(high, np.max(curves, axis=0))  # n=2: envelope
+    fig = curves_figure(groups, settings)
+    try:
+        for ax in fig.axes:
+            fills = ax.collections
+            edges = [line for line in ax.lines if line.get_linestyle() == "--"]
+            assert len(fills) == len(groups) and len(edges) == 2 * len(groups)
+            assert all(f.get_alpha() <= BAND_ALPHA for f in fills)
+            assert min(e.get_zorder() for e in edges) > max(f.get_zorder() for f in fills)
+    finally:
+        plt.close(fig)
+
+
+def test_the_censored_key_cannot_be_read_as_a_run(proposer_study):
+    """Issue 32: the censored marker in the legend looked like a data point (a group's colour, inside the axes). The
+    key is black, a colour no group has, in a framed box outside the axes."""
+    settings = StudySettings(k=1000)  # no run finds 1000 good gaits in 25 trials: every run censored
+    groups = _groups(proposer_study, settings)
+    fig = failures_figure(groups, settings)
+    try:
+        (ax,) = fig.axes
+        assert ax.get_legend() is None
+        (key,) = fig.legends
+        (handle,) = key.legend_handles
+        colours = {tuple(np.round(c.get_edgecolor()[0], 3)) for c in ax.collections}  # the runs' triangles
+        assert len(ax.collections) == len(groups) and (0.0, 0.0, 0.0, 1.0) not in colours
+        assert handle.get_color() == "black" and key.get_frame_on()
+        fig.canvas.draw()
+        assert not key.get_window_extent().overlaps(ax.get_window_extent())
+    finally:
+        plt.close(fig)
+
+
+def test_sfl_report_over_runs_of_two_proposers_compares_them_and_names_each_proposer(proposer_study, tmp_path):
+    """Issue 32: `sfl report` over a cma run and another proposer's run compared nothing, and a run's page named no
+    proposer. Runs that differ by more than the seed are compared as a study's groups; runs of one scenario but for
+    the seed, or one run, are not; every page names each learn run's proposer."""
+    cma, sfl_run_ = proposer_study / "kindcma_seed0", proposer_study / "kindsfl_seed1"
+    from click.testing import CliRunner
+
+    from sfl_brain.cli import main
+
+    done = CliRunner().invoke(main, ["report", str(cma), str(sfl_run_), "--out", str(tmp_path / "two"), "--k", "3"])
+    assert done.exit_code == 0, done.output
+    page = (tmp_path / "two" / "README.md").read_text()
+    assert "## Study: the groups compared" in page and "failures before K=3" in page
+    assert "| kind=cma | 1 |" in page and "| kind=sfl | 1 |" in page
+    assert (
+        "| kindcma_seed0 | completed | learn | cma |" in page and "| kindsfl_seed1 | completed | learn | sfl |" in page
+    )
+    assert (tmp_path / "two" / "study_learning.png").stat().st_size > 10_000
+    assert differ([cma, sfl_run_]) and not differ([cma, proposer_study / "kindcma_seed1"]) and not differ([cma])
+    one = write_report([cma], tmp_path / "one").read_text()
+    assert "## Study" not in one and "| kindcma_seed0 | completed | learn | cma |" in one
 
 
 def test_a_killed_run_is_named_and_left_out_of_every_mean_and_the_others_finish(tmp_path):

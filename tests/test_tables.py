@@ -18,6 +18,7 @@ from sfl_brain.recording.tables import (
     MAP_COLUMNS,
     TRIAL_COLUMNS,
     MapTable,
+    _list_f8,
     columns_markdown,
     join_map_parts,
 )
@@ -101,6 +102,21 @@ def test_records_doc_lists_every_fixed_column():
     assert columns_markdown() in text
     for col in (*DECISION_COLUMNS, *TRIAL_COLUMNS, *MAP_COLUMNS):
         assert f"| `{col.name}` |" in text
+
+
+def test_records_doc_gives_the_types_and_units_the_files_carry():
+    """Issue 32: records.md said `list<item: double>` where the files hold `list<element: double>`, and gave m, m/s, J
+    for `m_*` columns that carried no unit. The list type is the writer's own; each planar-biped unit the page
+    gives is the one its body declares (Body.METRICS), which the writer puts in the column's metadata (tested on a
+    real run above, and on the planar biped's files in test_planar.py's test_learning_run_end_to_end_with_processes)."""
+    from sfl_brain.bodies.planar_biped import PlanarBiped
+
+    text = (ROOT / "docs" / "records.md").read_text()
+    assert "list<item" not in text and f"| {_list_f8} |" in text and str(_list_f8) == "list<element: double>"
+    units = {name: unit for name, unit in PlanarBiped.METRICS.items() if unit}
+    assert {"distance": "m", "velocity": "m/s", "energy": "J"}.items() <= units.items()
+    for name, unit in units.items():
+        assert f"`m_{name}` {unit}," in text, name
 
 
 def test_run_folder_runs_again_on_its_own_and_says_what_made_it(tmp_path):

@@ -2,8 +2,10 @@
 
 * a sweep run: the viability map over the first two axes (success coloured by walking speed);
 * a learn run: both maps after learning (from ``acc.npz``) over the tried points;
-* for every run a table row: status first, then protocol, vigilance, trials, success rate, next to
-  the thesis's figure;
+* for every run a table row: status first, then protocol, proposer (learn runs: what chose each trial's point,
+  docs/proposers.md), vigilance, trials, success rate, next to the thesis's figure;
+* learn runs whose scenarios differ by more than the seed (another proposer, any key) compared as a study's groups
+  (:mod:`.study`), whether they come from ``sfl study`` or not;
 * learn runs at two or more fixed vigilance values: success rate against s_vig, every seed a dot,
   the mean a line, the thesis's E3.2 values as crosses (Fig. 3.13), and a table of the means.
 
@@ -39,6 +41,16 @@ from .sweep import is_grid_sweep, sweep_section  # noqa: E402
 from .terrain import terrain_sections  # noqa: E402
 
 
+def proposer_of(scenario: dict) -> str:
+    """What chose a learn run's points, as a page names it: the proposer's kind (``sfl`` when the scenario names
+    none, the default) and its gate when it has one (``cma, gate veto``); ``-`` for other protocols."""
+    if scenario.get("protocol", {}).get("kind") != "learn":
+        return "-"
+    proposer = scenario["protocol"].get("proposer") or {}
+    gate = proposer.get("gate", "off")
+    return proposer.get("kind", "sfl") + (f", gate {gate}" if gate != "off" else "")
+
+
 def _figure(run_dir: Path, out: Path, scenario: dict, rows: list[dict]) -> str:
     trials = [r for r in rows if r["kind"] == "trial" and r.get("v_unit")]
     if not trials:
@@ -63,7 +75,7 @@ def _figure(run_dir: Path, out: Path, scenario: dict, rows: list[dict]) -> str:
                     w = data[f"{name}_weights"][:, :2]
                     active = data[f"{name}_active"]
                     ax.scatter(w[active, 0], w[active, 1], s=25, c=colour, edgecolors="k", label=f"{name} map")
-        ax.set_title(f"{scenario['name']}: {ok.mean():.0%} success in {len(ok)} trials")
+        ax.set_title(f"{scenario['name']} ({proposer_of(scenario)}): {ok.mean():.0%} success in {len(ok)} trials")
     ax.set_xlabel(f"{names[0]} (unit)")
     ax.set_ylabel(f"{names[1]} (unit)")
     ax.set_xlim(0, 1)
@@ -183,8 +195,8 @@ def write_report(run_dirs: list[Path], out: Path, study: StudySettings | None = 
     ch5_names: set[str] = set()
     summaries: dict[str, dict] = {}
     lines = [
-        "| run | status | protocol | s_vig | trials | success rate | thesis | figure |",
-        "|---|---|---|---|---|---|---|---|",
+        "| run | status | protocol | proposer | s_vig | trials | success rate | thesis | figure |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for run_dir in run_dirs:
         scenario = yaml.safe_load((run_dir / "scenario.yaml").read_text())
@@ -230,7 +242,7 @@ def write_report(run_dirs: list[Path], out: Path, study: StudySettings | None = 
             group_thesis[group] = rates if group_thesis.get(group, rates) == rates else {}
         shown_status = status if completed else f"**{status}**"
         lines.append(
-            f"| {run_dir.name} | {shown_status} | {scenario['protocol']['kind']} | "
+            f"| {run_dir.name} | {shown_status} | {scenario['protocol']['kind']} | {proposer_of(scenario)} | "
             f"{s_vig if s_vig is not None else '-'} | "
             f"{summary['trials']} | {'-' if rate is None else f'{rate:.1%}'} | {thesis} | "
             f"{f'![]({figure})' if figure else ''} |"

@@ -3,8 +3,10 @@
 What a study page uses (``docs/results/baselines.md``, :mod:`sfl_brain.report.study`):
 
 - **intervals that respect bounds**: :func:`bootstrap_mean` (a percentile bootstrap interval of the mean: never
-  outside the values' range, so never below 0 for a count) and :func:`ratio_interval` (a ratio of two groups on the
-  log scale: always positive);
+  outside the values' range, so never below 0 for a count or above 1 for a rate), :func:`bootstrap_band` (the same,
+  trial by trial, for learning curves) and :func:`ratio_interval` (a ratio of two groups on the log scale: always
+  positive); with :data:`FEW` values or fewer a bootstrap interval is only the values' range, and a page lists the
+  values instead of calling it 95 %;
 - **tests**: :func:`paired_log_t` (a paired t-test on log(x + 1), where the seeds pair: the same seed's runs share
   their starting state), :func:`welch_log_t` (Welch's t-test on log(x + 1) otherwise), :func:`censored_rank_test`
   (Mann-Whitney's U where some runs never got there, each censored run taken at the bound least favourable to the
@@ -35,6 +37,9 @@ from scipy import stats
 #: resamples of a bootstrap interval; its generator's seed (the same page from the same runs)
 BOOTSTRAP_RESAMPLES = 10_000
 BOOTSTRAP_SEED = 0
+#: at most this many values, a 95 % percentile bootstrap interval of the mean is their range (min, max): each extreme
+#: mean, all draws of one value, has probability n**-n, above 2.5 % for n <= 3
+FEW = 3
 
 
 @dataclass(frozen=True)
@@ -92,6 +97,37 @@ def bootstrap_mean(
     means = a[rng.integers(0, a.size, size=(resamples, a.size))].mean(axis=1)
     low, high = np.quantile(means, [(1 - confidence) / 2, (1 + confidence) / 2])
     return Interval(float(a.mean()), float(low), float(high), confidence)
+
+
+def bootstrap_band(
+    curves: Sequence[Sequence[float]],
+    confidence: float = 0.95,
+    resamples: int = BOOTSTRAP_RESAMPLES,
+    seed: int = BOOTSTRAP_SEED,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mean and percentile bootstrap band, trial by trial, of ``curves`` (one per seed) over the trials they all
+    have. A resample draws whole seeds, the same draw at every trial; a nan (no value yet at that trial) is left out
+    of that trial's mean. Every resampled mean is a weighted mean of the seeds' values, so the band lies within the
+    seeds' range at every trial (at :data:`FEW` seeds or fewer it is that range): never outside what a curve can
+    reach. A trial with one value has no band (nan)."""
+    length = min(len(c) for c in curves)
+    a = np.array([np.asarray(c[:length], dtype=float) for c in curves]).reshape(len(curves), length)
+    has = np.isfinite(a)
+    n = has.sum(axis=0)
+    mean = np.where(n > 0, np.where(has, a, 0.0).sum(axis=0) / np.maximum(n, 1), np.nan)
+    draws = np.random.default_rng(seed).multinomial(len(curves), np.full(len(curves), 1 / len(curves)), resamples)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        means = (draws @ np.where(has, a, 0.0)) / (draws @ has)  # (resamples, trials); nan: no seed drawn has one
+    if not means.size:
+        return mean, mean.copy(), mean.copy()
+    valid = np.isfinite(means)
+    means = np.where(valid, means, np.nan)
+    low, high = np.full(length, np.nan), np.full(length, np.nan)
+    enough = (n > 1) & valid.any(axis=0)
+    if enough.any():
+        tails = [(1 - confidence) / 2, (1 + confidence) / 2]
+        low[enough], high[enough] = np.nanquantile(means[:, enough], tails, axis=0)
+    return mean, low, high
 
 
 def _log(values: Sequence[float], shift: float = 1.0) -> np.ndarray:

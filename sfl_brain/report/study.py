@@ -1,17 +1,20 @@
 """``sfl report`` for a study: its runs grouped by what was varied, compared on the safe-learning metrics.
 
 A group is every run whose scenario is the same except for its seed (the keys that differ between the runs'
-``scenario.yaml`` name the groups, ``value=0.1`` or ``kind=random``: whatever ``--vary`` changed). For each group,
-over its completed runs (seeds):
+``scenario.yaml`` name the groups, ``value=0.1`` or ``kind=random``: whatever ``--vary`` changed, or whatever differs
+between the runs given to ``sfl report``: :func:`differ`). For each group, over its completed runs (seeds):
 
 - learning curves against trials: the success rate over a moving window of trials and the cumulative failures,
-  the mean over seeds with a 95 % t-interval band; the best eta so far the same way;
+  the mean over seeds with a 95 % bootstrap band (:func:`.stats.bootstrap_band`: within the seeds' range, so a band
+  of two seeds is their envelope, not the whole plot), light fills with dashed edges drawn above every fill so that
+  no band hides another; the best eta so far the same way;
 - failures before K distinct good gaits (:func:`sfl_brain.recording.metrics.safe_learning`) as box plots, with the runs
-  that never got there (censored) drawn apart at their total failures, a lower bound;
+  that never got there (censored) drawn apart at their total failures, a lower bound, keyed in black in a box below
+  the axes (no group's colour, not among the data);
 - a table: seeds, failures before the first success, failures before K, failures, falls, the success rate over the
   last window, the best eta and the wall time, each as the mean and its 95 % percentile bootstrap interval over the
   seeds (:func:`.stats.bootstrap_mean`: within the values' range, never below 0 for a count), with censored
-  counts.
+  counts; at :data:`.stats.FEW` seeds or fewer the seeds' values instead of an interval that would be their range.
 
 For pages that compare groups and make claims (``docs/results/baselines.md``): :func:`bounded_cell`,
 :func:`censored_cell`, :func:`tradeoff_figure` (failures against best eta per group) and :class:`Claim` with
@@ -34,12 +37,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import yaml  # noqa: E402
-from scipy import stats  # noqa: E402
+from matplotlib.lines import Line2D  # noqa: E402
 
 from ..recording.metrics import DISTINCT, K_GOOD, safe_learning, trial_rows  # noqa: E402
 from ..recording.records import read_records, run_status  # noqa: E402
 from ..study.study import WINDOW  # noqa: E402
-from .stats import Test, bootstrap_mean, holm, kaplan_meier_median  # noqa: E402
+from .stats import FEW, Test, bootstrap_band, bootstrap_mean, holm, kaplan_meier_median  # noqa: E402
 
 #: figure width (in) and font size (pt): readable on a printed page
 WIDTH_IN = 6.5
@@ -69,29 +72,16 @@ class StudySettings:
 
 
 # --------------------------------------------------------------------------- statistics
-def t_interval(values, confidence: float = 0.95) -> tuple[float, float, int]:
-    """(mean, half-width of the two-sided t-interval, n) of the finite ``values``; the half-width is nan for n < 2."""
-    a = np.asarray([v for v in values if v is not None], dtype=float)
-    a = a[np.isfinite(a)]
-    n = len(a)
-    if n == 0:
-        return float("nan"), float("nan"), 0
-    if n == 1:
-        return float(a[0]), float("nan"), 1
-    half = stats.t.ppf(0.5 + confidence / 2, n - 1) * a.std(ddof=1) / np.sqrt(n)
-    return float(a.mean()), float(half), n
-
-
-def band(curves: list, confidence: float = 0.95) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Mean and 95 % t-band, trial by trial, of curves (one per seed) over the trials they all have; nan values
-    (e.g. no success yet) are left out of that trial's mean, and the band needs two values."""
-    length = min(len(c) for c in curves)
-    a = np.array([np.asarray(c[:length], dtype=float) for c in curves]).reshape(len(curves), length)
-    n = np.sum(np.isfinite(a), axis=0)
-    mean = np.array([a[np.isfinite(a[:, i]), i].mean() if n[i] else np.nan for i in range(length)])
-    sd = np.array([a[np.isfinite(a[:, i]), i].std(ddof=1) if n[i] > 1 else np.nan for i in range(length)])
-    half = stats.t.ppf(0.5 + confidence / 2, np.maximum(n - 1, 1)) * sd / np.sqrt(np.maximum(n, 1))
-    return mean, mean - half, mean + half
+def interval_numbers(values) -> dict:
+    """The finite ``values``' mean and its 95 % percentile bootstrap interval (:func:`.stats.bootstrap_mean`: within
+    the values' range, so within the possible one) with n, for ``study_summary.json``; ``interval`` says what
+    ``low`` and ``high`` are: ``bootstrap 95 %``, ``range`` (n <= FEW: the bootstrap interval is the values' range) or
+    ``none`` (n < 2)."""
+    a = [float(v) for v in values if v is not None and np.isfinite(v)]
+    interval = bootstrap_mean(a)
+    kind = "none" if len(a) < 2 else "range" if len(a) <= FEW else "bootstrap 95 %"
+    low, high = (None, None) if len(a) < 2 else (interval.low, interval.high)
+    return {"mean": interval.estimate if a else None, "low": low, "high": high, "n": len(a), "interval": kind}
 
 
 def moving_success_rate(success, window: int) -> np.ndarray:
@@ -196,119 +186,128 @@ def run_metrics(run_dir: Path, settings: StudySettings) -> RunMetrics:
 
 
 # --------------------------------------------------------------------------- figures
+#: a band's fill: light enough that a band drawn later does not hide one drawn before (its dashed edges, drawn above
+#: every fill, show where each band ends)
+BAND_ALPHA = 0.15
+BAND_TITLE = f"band: 95 % bootstrap interval, dashed edges (at {FEW} seeds or fewer, their range)"
+
+
 def _colours(n: int) -> list:
     return [plt.get_cmap("tab10")(i % 10) for i in range(n)]
 
 
-def _curves_figure(groups: dict[str, list[RunMetrics]], settings: StudySettings, out: Path) -> str:
-    """Success rate over the moving window and cumulative failures against trials, mean and 95 % band per group."""
-    with plt.rc_context(STYLE):
-        fig, (rate_ax, fail_ax) = plt.subplots(1, 2, figsize=(WIDTH_IN, 2.9))
-        top = 1.0
-        for colour, (label, runs) in zip(_colours(len(groups)), groups.items(), strict=True):
-            failures = [np.asarray(r.metrics["cumulative_failures"], dtype=float) for r in runs]
-            top = max(top, *(f.max() for f in failures if len(f)))
-            for ax, curves, high in (
-                (rate_ax, [moving_success_rate(r.success, settings.window) for r in runs], 1.0),
-                (fail_ax, failures, np.inf),
-            ):
-                mean, lo, hi = band(curves)
-                x = np.arange(1, len(mean) + 1)
-                ax.plot(x, mean, color=colour, lw=1.4, label=f"{label} (n={len(runs)})")
-                ax.fill_between(x, np.clip(lo, 0, high), np.clip(hi, 0, high), color=colour, alpha=0.2, lw=0)
-        rate_ax.set_xlabel("trial (count)")
-        rate_ax.set_ylabel(f"success rate, last {settings.window} trials\n(fraction of trials)")
-        rate_ax.set_ylim(-0.02, 1.02)
-        fail_ax.set_xlabel("trial (count)")
-        fail_ax.set_ylabel("cumulative failures (trials)")
-        fail_ax.set_ylim(0, 1.1 * top)  # the runs' own range: a band of few seeds may be far wider
-        handles, labels = rate_ax.get_legend_handles_labels()
-        fig.legend(handles, labels, loc="lower center", ncol=min(3, len(labels)), frameon=False)
-        title = "Learning curves: mean over seeds, 95 % t-interval band (clipped to the possible range)"
-        fig.suptitle(title, fontsize=FONT_PT + 1)
-        fig.tight_layout(rect=(0, 0.06 + 0.05 * ((len(labels) - 1) // 3), 1, 1))
-        fig.savefig(out / "study_learning.png", dpi=150)
-        plt.close(fig)
-    return "study_learning.png"
+def _mean_and_band(ax, curves: list, colour, label: str) -> None:
+    """One group's mean curve over its seeds and its bootstrap band (:func:`.stats.bootstrap_band`: within the seeds'
+    range): a light fill under every line, its edges dashed above every fill, the mean above them."""
+    mean, low, high = bootstrap_band(curves)
+    x = np.arange(1, len(mean) + 1)
+    ax.fill_between(x, low, high, color=colour, alpha=BAND_ALPHA, lw=0, zorder=1)
+    for edge in (low, high):
+        ax.plot(x, edge, color=colour, lw=0.7, ls="--", zorder=3)
+    ax.plot(x, mean, color=colour, lw=1.6, zorder=4, label=label)
 
 
-def _eta_figure(groups: dict[str, list[RunMetrics]], out: Path) -> str:
-    with plt.rc_context(STYLE):
-        fig, ax = plt.subplots(figsize=(WIDTH_IN, 2.8))
-        top = 0.0
-        for colour, (label, runs) in zip(_colours(len(groups)), groups.items(), strict=True):
-            # 0 before a run's first success: no gait yet (a failed trial's eta is 0)
-            curves = [np.array([0.0 if v is None else v for v in r.metrics["best_eta_so_far"]]) for r in runs]
-            top = max(top, *(c.max() for c in curves if len(c)))
-            mean, lo, hi = band(curves)
-            x = np.arange(1, len(mean) + 1)
-            ax.plot(x, mean, color=colour, lw=1.4, label=f"{label} (n={len(runs)})")
-            ax.fill_between(x, np.clip(lo, 0, None), hi, color=colour, alpha=0.2, lw=0)  # eta >= 0
-        ax.set_xlabel("trial (count)")
-        ax.set_ylabel(ETA_LABEL)
-        ax.set_ylim(0, 1.15 * top or 1.0)  # the runs' own range: a band of few seeds may be far wider
-        ax.set_title("Best eta so far (0 before a first success): mean over seeds, 95 % t-interval band")
-        ax.legend(loc="lower right", frameon=False)
-        fig.tight_layout()
-        fig.savefig(out / "study_best_eta.png", dpi=150)
-        plt.close(fig)
-    return "study_best_eta.png"
+def curves_figure(groups: dict[str, list[RunMetrics]], settings: StudySettings) -> plt.Figure:
+    """Success rate over the moving window and cumulative failures against trials, mean and band per group."""
+    fig, (rate_ax, fail_ax) = plt.subplots(1, 2, figsize=(WIDTH_IN, 2.9))
+    for colour, (label, runs) in zip(_colours(len(groups)), groups.items(), strict=True):
+        shown = f"{label} (n={len(runs)})"
+        _mean_and_band(rate_ax, [moving_success_rate(r.success, settings.window) for r in runs], colour, shown)
+        failures = [np.asarray(r.metrics["cumulative_failures"], dtype=float) for r in runs]
+        _mean_and_band(fail_ax, failures, colour, shown)
+    rate_ax.set_xlabel("trial (count)")
+    rate_ax.set_ylabel(f"success rate, last {settings.window} trials\n(fraction of trials)")
+    rate_ax.set_ylim(-0.02, 1.02)
+    fail_ax.set_xlabel("trial (count)")
+    fail_ax.set_ylabel("cumulative failures (trials)")
+    fail_ax.set_ylim(bottom=0)
+    handles, labels = rate_ax.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=min(3, len(labels)), frameon=False)
+    fig.suptitle(f"Learning curves: mean over seeds;\n{BAND_TITLE}", fontsize=FONT_PT + 1)
+    fig.tight_layout(rect=(0, 0.06 + 0.05 * ((len(labels) - 1) // 3), 1, 1))
+    return fig
 
 
-def _failures_figure(groups: dict[str, list[RunMetrics]], settings: StudySettings, out: Path) -> str:
+def eta_figure(groups: dict[str, list[RunMetrics]]) -> plt.Figure:
+    """The best eta so far against trials (0 before a run's first success), mean and band per group."""
+    fig, ax = plt.subplots(figsize=(WIDTH_IN, 2.8))
+    for colour, (label, runs) in zip(_colours(len(groups)), groups.items(), strict=True):
+        # 0 before a run's first success: no gait yet (a failed trial's eta is 0)
+        curves = [np.array([0.0 if v is None else v for v in r.metrics["best_eta_so_far"]]) for r in runs]
+        _mean_and_band(ax, curves, colour, f"{label} (n={len(runs)})")
+    ax.set_xlabel("trial (count)")
+    ax.set_ylabel(ETA_LABEL)
+    ax.set_ylim(bottom=0)
+    ax.set_title(f"Best eta so far (0 before a first success): mean over seeds;\n{BAND_TITLE}")
+    ax.legend(loc="lower right", frameon=False)
+    fig.tight_layout()
+    return fig
+
+
+#: the key to the censored marker: black, a colour no group has, in a framed box below the axes, so it cannot be
+#: read as a run
+CENSORED_KEY = {"marker": "^", "color": "black", "markerfacecolor": "none", "markersize": 7, "linestyle": "none"}
+
+
+def failures_figure(groups: dict[str, list[RunMetrics]], settings: StudySettings) -> plt.Figure:
     """Failures before K distinct good gaits per group: a box over the runs that got there, the censored runs (never
-    got there) as open triangles at their total failures (a lower bound)."""
+    got there) as open triangles at their total failures (a lower bound), keyed below the axes."""
+    fig, ax = plt.subplots(figsize=(WIDTH_IN, 3.3))
+    rng = np.random.default_rng(0)  # a fixed jitter of the dots
+    any_censored = False
+    for i, (colour, runs) in enumerate(zip(_colours(len(groups)), groups.values(), strict=True), 1):
+        reached = [r.metrics["failures_before_k"] for r in runs if r.metrics["failures_before_k"] is not None]
+        censored = [r.metrics["failures"] for r in runs if r.metrics["failures_before_k"] is None]
+        if reached:
+            ax.boxplot([reached], positions=[i], widths=0.5, showfliers=False, medianprops={"color": colour})
+            ax.scatter(i + rng.uniform(-0.12, 0.12, len(reached)), reached, s=14, color=colour, zorder=3)
+        if censored:
+            jitter = i + rng.uniform(-0.12, 0.12, len(censored))
+            ax.scatter(jitter, censored, s=36, marker="^", facecolors="none", edgecolors=colour, zorder=3)
+            any_censored = True
+    ax.set_xticks(range(1, len(groups) + 1))
+    ax.set_xticklabels(
+        [
+            f"{label}\n{sum(r.metrics['failures_before_k'] is None for r in runs)} censored of {len(runs)}"
+            for label, runs in groups.items()
+        ]
+    )
+    ax.set_xlim(0.4, len(groups) + 0.6)
+    ax.set_ylim(bottom=0)
+    ax.set_ylabel(f"failures before K={settings.k}\ndistinct good gaits (trials)")
+    ax.set_title(f"Failures before {settings.k} good gaits at least {settings.distinct:g} apart (unit cube)")
+    bottom = 0.0
+    if any_censored:
+        key = Line2D([], [], **CENSORED_KEY)
+        text = f"key: a censored run, fewer than K={settings.k} good gaits (drawn at its total failures, a lower bound)"
+        fig.legend([key], [text], loc="lower center", frameon=True, fontsize=FONT_PT - 1)
+        bottom = 0.1
+    fig.tight_layout(rect=(0, bottom, 1, 1))
+    return fig
+
+
+def _figure_file(build, out: Path, name: str) -> str:
+    """Build a figure in the page's style (``build()``), write it to ``out / name`` and return ``name``."""
     with plt.rc_context(STYLE):
-        fig, ax = plt.subplots(figsize=(WIDTH_IN, 2.9))
-        censored_drawn = False
-        rng = np.random.default_rng(0)  # a fixed jitter of the dots
-        for i, (colour, runs) in enumerate(zip(_colours(len(groups)), groups.values(), strict=True), 1):
-            reached = [r.metrics["failures_before_k"] for r in runs if r.metrics["failures_before_k"] is not None]
-            censored = [r.metrics["failures"] for r in runs if r.metrics["failures_before_k"] is None]
-            if reached:
-                ax.boxplot([reached], positions=[i], widths=0.5, showfliers=False, medianprops={"color": colour})
-                ax.scatter(i + rng.uniform(-0.12, 0.12, len(reached)), reached, s=14, color=colour, zorder=3)
-            if censored:
-                ax.scatter(
-                    i + rng.uniform(-0.12, 0.12, len(censored)),
-                    censored,
-                    s=36,
-                    marker="^",
-                    facecolors="none",
-                    edgecolors=colour,
-                    zorder=3,
-                    label=None if censored_drawn else f"censored: fewer than K={settings.k} gaits (at total failures)",
-                )
-                censored_drawn = True
-        ax.set_xticks(range(1, len(groups) + 1))
-        ax.set_xticklabels(
-            [
-                f"{label}\n{sum(r.metrics['failures_before_k'] is None for r in runs)} censored of {len(runs)}"
-                for label, runs in groups.items()
-            ]
-        )
-        ax.set_xlim(0.4, len(groups) + 0.6)
-        ax.set_ylim(bottom=0)
-        ax.set_ylabel(f"failures before K={settings.k}\ndistinct good gaits (trials)")
-        ax.set_title(f"Failures before {settings.k} good gaits at least {settings.distinct:g} apart (unit cube)")
-        if censored_drawn:
-            ax.legend(loc="upper right", frameon=False)
-        fig.tight_layout()
-        fig.savefig(out / "study_failures_before_k.png", dpi=150)
-        plt.close(fig)
-    return "study_failures_before_k.png"
+        fig = build()
+        fig.savefig(out / name, dpi=150)
+    plt.close(fig)
+    return name
 
 
 # --------------------------------------------------------------------------- the page
 def bounded_cell(values, digits: str = ".3g") -> str:
     """The mean of the finite ``values`` and its 95 % percentile bootstrap interval, ``mean [low, high]`` (``-``
-    without a value; the mean alone with one)."""
+    without a value). With :data:`.stats.FEW` values or fewer that interval would be only their range, not 95 %:
+    the values are listed instead, ``mean (n=2: a, b)``; one value is ``value (n=1)``."""
     a = [float(v) for v in values if v is not None and np.isfinite(v)]
     if not a:
         return "-"
     interval = bootstrap_mean(a)
     if len(a) == 1:
-        return f"{interval.estimate:{digits}}"
+        return f"{a[0]:{digits}} (n=1)"
+    if len(a) <= FEW:
+        return f"{interval.estimate:{digits}} (n={len(a)}: {', '.join(f'{v:{digits}}' for v in sorted(a))})"
     return f"{interval.estimate:{digits}} [{interval.low:{digits}}, {interval.high:{digits}}]"
 
 
@@ -362,8 +361,8 @@ def group_table(groups: dict[str, list[RunMetrics]], settings: StudySettings) ->
     return lines
 
 
-def study_section(run_dirs: list[Path], out: Path, settings: StudySettings) -> tuple[list[str], dict]:
-    """The study's Markdown lines and figures (written to ``out``) for its learn runs, and its numbers as a dict."""
+def learn_runs(run_dirs: list[Path]) -> tuple[dict[str, dict], dict[str, Path]]:
+    """The learn runs among ``run_dirs``: their scenarios and folders by run name."""
     scenarios: dict[str, dict] = {}
     folders: dict[str, Path] = {}
     for run_dir in run_dirs:
@@ -371,6 +370,19 @@ def study_section(run_dirs: list[Path], out: Path, settings: StudySettings) -> t
         if scenario.get("protocol", {}).get("kind") == "learn":
             scenarios[run_dir.name] = scenario
             folders[run_dir.name] = run_dir
+    return scenarios, folders
+
+
+def differ(run_dirs: list[Path]) -> bool:
+    """Whether the learn runs among ``run_dirs`` make two groups or more (their scenarios differ by more than the
+    seed: another proposer, vigilance, any key), so that a page compares them as a study's."""
+    scenarios, _ = learn_runs(run_dirs)
+    return len(group_runs(scenarios)) > 1
+
+
+def study_section(run_dirs: list[Path], out: Path, settings: StudySettings) -> tuple[list[str], dict]:
+    """The study's Markdown lines and figures (written to ``out``) for its learn runs, and its numbers as a dict."""
+    scenarios, folders = learn_runs(run_dirs)
     if not scenarios:
         return [], {}
     names = group_runs(scenarios)
@@ -387,16 +399,18 @@ def study_section(run_dirs: list[Path], out: Path, settings: StudySettings) -> t
         f"Runs grouped by what differs between their scenarios (the seed apart); each group over its completed runs "
         f"(seeds). A good gait is a success at least {settings.distinct:g} (unit cube) from every good gait before it; "
         f"K = {settings.k}. Each value is the mean and its 95 % percentile bootstrap interval over the seeds "
-        "(within the values' range; with few seeds it is narrower than it should be); a run that never got there "
+        "(within the values' range, so within the possible one; with few seeds it is narrower than it should be); "
+        f"with {FEW} seeds or fewer that interval would be only their range, so the seeds' values are listed "
+        "instead (`mean (n=2: a, b)`); a run that never got there "
         "is censored (counted apart, its total failures a lower bound), not averaged. A failure is any unsuccessful "
         "trial, a fall one whose body reports `fell`.",
         "",
     ]
     if shown:
         figures = [
-            _curves_figure(shown, settings, out),
-            _eta_figure(shown, out),
-            _failures_figure(shown, settings, out),
+            _figure_file(lambda: curves_figure(shown, settings), out, "study_learning.png"),
+            _figure_file(lambda: eta_figure(shown), out, "study_best_eta.png"),
+            _figure_file(lambda: failures_figure(shown, settings), out, "study_failures_before_k.png"),
         ]
         lines += [*group_table(shown, settings), "", *[f"![]({f})" for f in figures]]
     else:
@@ -417,11 +431,17 @@ def study_section(run_dirs: list[Path], out: Path, settings: StudySettings) -> t
         "groups": {
             label: {
                 "runs": [r.name for r in runs],
-                "failures_before_first_success": t_interval([r.metrics["failures_before_first_success"] for r in runs]),
-                "failures_before_k": t_interval([r.metrics["failures_before_k"] for r in runs]),
+                "failures_before_first_success": interval_numbers(
+                    [r.metrics["failures_before_first_success"] for r in runs]
+                ),
+                "failures_before_k": interval_numbers([r.metrics["failures_before_k"] for r in runs]),
                 "censored_before_k": sum(r.metrics["failures_before_k"] is None for r in runs),
-                "best_eta": t_interval([r.metrics["best_eta"] for r in runs]),
-                "wall_time_s": t_interval([r.wall_s for r in runs]),
+                "success_rate": interval_numbers([r.metrics["success_rate"] for r in runs]),
+                "success_rate_last_window": interval_numbers(
+                    [moving_success_rate(r.success, settings.window)[-1] for r in runs]
+                ),
+                "best_eta": interval_numbers([r.metrics["best_eta"] for r in runs]),
+                "wall_time_s": interval_numbers([r.wall_s for r in runs]),
             }
             for label, runs in shown.items()
         },
