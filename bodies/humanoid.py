@@ -48,7 +48,7 @@ perturbation (the parameter's value otherwise).
 
 **Speed.** One PyBullet client per body (DIRECT, no GUI). A world is built once per terrain and saved;
 the next trial on that terrain restores it (``restoreState``), which gives the same trial bit for bit
-as a fresh build (tests/test_humanoid.py). Solver settings: docs/bodies/humanoid.md.
+as a fresh build (tests/bodies/test_humanoid.py). Solver settings: docs/bodies/humanoid.md.
 """
 
 from __future__ import annotations
@@ -554,7 +554,7 @@ class Humanoid(Body):
 
         The robot's contact points and both feet's frames are asked for once each; the points are shared out by link:
         the same points in the same order as asking per foot (PyBullet filters its one list of points either way;
-        tests/test_humanoid_speed.py). Each clip to [0, 1] is written as
+        tests/bodies/test_humanoid_speed.py). Each clip to [0, 1] is written as
         ``min(max(share, 0.0), 1.0)`` computes it (a NaN passes through)."""
         c, robot = self.client, self.robot
         toe_x, heel_x = FSR_X
@@ -880,7 +880,7 @@ def _motor_powers(steps: list[list[float]]) -> list[float]:
     """sum_i c_i tau_i^2 (W, (5.5)) of each physics step of a tick, ``steps`` its joint torques: one vectorised sum for
     the tick instead of one per step, and the same floats as ``MOTOR @ tau**2`` per step, bit for bit: that 12-term dot
     adds the joints' terms one after the other in joint order, and so does a running sum (``accumulate``, sequential
-    by definition, where a plain sum would add in pairs; tests/test_humanoid_speed.py)."""
+    by definition, where a plain sum would add in pairs; tests/bodies/test_humanoid_speed.py)."""
     terms = np.array(steps)  # (steps, joints)
     terms *= terms
     terms *= MOTOR

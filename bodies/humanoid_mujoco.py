@@ -20,7 +20,7 @@ sensors and the energy read is the clutch's constraint force over the step.
 
 **Speed and determinism.** One model per terrain (and ball or not), compiled once; every trial resets the data to the
 saved start (``mj_resetData``, then the start's positions): MuJoCo keeps no contact cache across steps, so the same
-request gives the same trial bit for bit whatever ran before (tests/test_humanoid_mujoco.py).
+request gives the same trial bit for bit whatever ran before (tests/bodies/test_humanoid_mujoco.py).
 """
 
 from __future__ import annotations

@@ -14,7 +14,7 @@ The circuit ``modules/cpg/circuits/humanoid_nao.yaml`` sets each joint's command
   offset.
 - **G**: the amplitude of the first harmonic of each joint's command is a target amplitude (``TARGETS``), with the
   network driven "kinematically" (each joint's angle input = its last command: an ideal servo), measured over the
-  last 4 s of 10 s. The targets are the first harmonics of the open-loop gait of ``tests/test_humanoid.py`` (CPG-
+  last 4 s of 10 s. The targets are the first harmonics of the open-loop gait of ``tests/bodies/test_humanoid.py`` (CPG-
   HUMANOID.md §8's recipe: hip pitch 0.15 sin phi, knee lift 0.6 max(0, cos phi), hip pitch - lift/2, ankle pitch
   -(hip pitch + knee), roll 0.1): knee 0.6/2 = 0.3, hip and ankle pitch sqrt(0.15^2 + (0.6/4)^2) = 0.212, rolls 0.1;
   shoulders 0.1 (chosen: the recipe keeps the arms still; the probe walked the same with 0, 0.2 or 0.4). With the PF

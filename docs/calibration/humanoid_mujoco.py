@@ -8,8 +8,8 @@ besides are its contact model and the servo's clutches. Each line printed is a t
 - **standing** (5 s, every joint held at the standing pose): the load on the feet in the last second (mean +- s.d.,
   of the weight 50.97 N), the energy (5.6) spent holding the crouch, the torso's drift and how far its centre of mass
   sank; PyBullet: 50.9 N +- 0.3, 3.8 J;
-- **open loop** (tests/test_humanoid.py's oscillator gait after CPG-HUMANOID.md §8, 3 seeds, start_noise 0.02): time
-  to the 1.5-m line, lateral, energy; PyBullet 8.7-9.0 s;
+- **open loop** (tests/bodies/test_humanoid.py's oscillator gait after CPG-HUMANOID.md §8, 3 seeds, start_noise 0.02):
+  time to the 1.5-m line, lateral, energy; PyBullet 8.7-9.0 s;
 - **CPG** (the default gait of modules/cpg/circuits/humanoid_nao.yaml, unchanged, ``--walk N`` seeds, start_noise
   ``--noise``): the same; PyBullet 13.6-14.1 s (docs/results/chapter4/humanoid_gait.md).
 
@@ -46,7 +46,7 @@ from sfl_brain.bodies.humanoid_table import TOTAL_MASS  # noqa: E402
 from sfl_brain.body import InProcessLink  # noqa: E402
 from sfl_brain.messages import TrialRequest  # noqa: E402
 from sfl_brain.modules.controllers.cpg import CPGController, CPGParams  # noqa: E402
-from tests.test_humanoid import GAIT, Hold, OpenLoopGait  # noqa: E402
+from tests.bodies.test_humanoid import GAIT, Hold, OpenLoopGait  # noqa: E402
 
 INDEX = {s.name: i for i, s in enumerate(SENSORS)}
 FEET = [INDEX[name] for name in ("heel_l", "toe_l", "heel_r", "toe_r")]

@@ -608,8 +608,8 @@ close to failures (in a plain CMA-ES run the best gaits were no-go decisions at 
 its best eta fell to 0.73-0.84x. With `resample` the strategy is told nothing of the gate, keeps its own path and
 reaches the plain optimiser's best eta. TPE with `resample` redraws from a model that learnt nothing of the refusal:
 on the analytic body and in the unit tests its every redraw fell in the same no-go corner until the budget was spent
-(`tests/test_gate.py`), and it was not run on the walkers; with `veto` the refused corner enters TPE's worse group.
-Restarts of CMA-ES (`restart_below` 0.05, `restart_from: novel`) restarted once per run at that threshold, late
+(`tests/proposers/test_gate.py`), and it was not run on the walkers; with `veto` the refused corner enters TPE's worse
+group. Restarts of CMA-ES (`restart_below` 0.05, `restart_from: novel`) restarted once per run at that threshold, late
 (trial 149 in seed 10), and found one or two more gaits; the final group restarts when the step size falls below the
 gaits' distinctness (0.1)."""
 DISCUSSION = """"""

@@ -8,7 +8,7 @@ The same equations, written per cell as the thesis writes them, for every batch 
 
 with classic RK4 (§7.2), y(t + h) = y + h/6 (k1 + 2 (k2 + k3) + k4). The per-tick constants (i_ext / tau_m and
 -sigma_s E_s / tau_s, ``CPGNetwork._per_tick_constant``) are added as the numpy step adds them, so the sums are the same
-up to their order: commands within 1e-9 of the numpy step's over a walk (tests/test_cpg_kernel.py).
+up to their order: commands within 1e-9 of the numpy step's over a walk (tests/modules/test_cpg_kernel.py).
 
 numpy pays about a microsecond per call on arrays of 24 cells, and its step needs 21 calls per RK4 step: 210 per
 10-ms tick. Compiled, the whole tick is one call. numba is optional (``pip install -e '.[fast]'``): without it the

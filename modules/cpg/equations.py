@@ -1,7 +1,7 @@
 """The cells of the MLMP-CPG (thesis ch. 4), one function per equation, readable: (4.1)-(4.13).
 
 ``CPGNetwork`` (network.py) computes exactly these, vectorised over every cell of every joint (and, with
-``kernel: numba``, compiled.py per cell); the tests check the network against them (tests/test_cpg.py).
+``kernel: numba``, compiled.py per cell); the tests check the network against them (tests/modules/test_cpg.py).
 """
 
 from __future__ import annotations

@@ -81,7 +81,8 @@ from .terrain import TerrainSwitching
 from .trial_start import TrialStart
 
 #: ``np.dot``'s C function without its ``__array_function__`` dispatch (a Python call per use, about 0.3 us: 50 uses per
-#: control tick on the hot path); the same function, so the same numbers, bit for bit (tests/test_humanoid_speed.py)
+#: control tick on the hot path); the same function, so the same numbers, bit for bit
+#: (tests/bodies/test_humanoid_speed.py)
 _dot = getattr(np.dot, "_implementation", np.dot)
 
 TARGETS = ("PF_E", "PF_F", "MN_E", "MN_F")
@@ -360,7 +361,7 @@ class CPGNetwork(TrialStart, GainGroups, PhaseResetting, PatternSwitching, Terra
         (c = h/2, h/2, h, h) at once with ``_rhs`` scaled by c, the next stage's state is y + c k (one add), and the
         weighted sum of the four increments is one dot. A stage is then five calls and an RK4 step twenty; it
         computes the same sums as the textbook form, rounded in another order (within 1e-12 of it, see
-        tests/test_cpg.py)."""
+        tests/modules/test_cpg.py)."""
         scaled = self._scaled.get(h)
         if scaled is None:
             scaled = self._scaled[h] = (0.5 * h * self._rhs, h * self._rhs)

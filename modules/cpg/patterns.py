@@ -19,8 +19,8 @@ PLATEAU, QUIESCENT, ALMOST_OSCILLATOR, OSCILLATOR = "plateau", "quiescent", "alm
 KINDS = (PLATEAU, QUIESCENT, ALMOST_OSCILLATOR, OSCILLATOR)
 
 #: one (sigma_s, sigma_f) of each class, to switch a joint to a pattern by name (digest §7.11): points of the digest's
-#: single-cell reference map (CPG-HUMANOID.md §1.7), the same points tests/test_cpg.py classifies: plateau below the
-#: line sigma_s = (sigma_f - 1) / 2 (sigma_s = 0), quiescent at sigma_f <= 0.25, almost-oscillator at sigma_f in
+#: single-cell reference map (CPG-HUMANOID.md §1.7), the same points tests/modules/test_cpg.py classifies: plateau below
+#: the line sigma_s = (sigma_f - 1) / 2 (sigma_s = 0), quiescent at sigma_f <= 0.25, almost-oscillator at sigma_f in
 #: [0.5, 1], oscillator at (2, 2) (period 1.25 s).
 PATTERN_POINTS = {
     PLATEAU: (0.0, 2.0),

@@ -15,8 +15,8 @@ For each run:
 A neuron's pattern and energy come from one joint (RG, PF, MN, E and F; ``modules/cpg/patterns.py``), kicked as
 the digest's reference map (+1 into RG-F for 80 ms) and run 20 s: the class from the flexor RG's potential, the
 energy from theta = MN_E - MN_F over 10 s from the end of the kick (digest §7.13). E and F are uncoupled, the single
-cell of the digest's reference map (§1.7) that E4.1 and the energy test of tests/test_cpg.py use; the classes of the
-coupled joint (Table 4.1's -1) are counted beside them.
+cell of the digest's reference map (§1.7) that E4.1 and the energy test of tests/modules/test_cpg.py use; the classes of
+the coupled joint (Table 4.1's -1) are counted beside them.
 """
 
 from __future__ import annotations

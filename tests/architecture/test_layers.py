@@ -29,7 +29,7 @@ from sfl_brain.protocols.local import LocalModules, run_local
 from sfl_brain.protocols.service import Interrupted, RunError
 from sfl_brain.scenario import load
 
-from .conftest import ROOT, SCENARIOS
+from ..conftest import ROOT, SCENARIOS
 
 LEARN = SCENARIOS / "analytic_learn.yaml"
 ZENOH_SIDE = (

@@ -10,9 +10,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-from .conftest import on_all_cores
+from ..conftest import on_all_cores
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def bench(script: str, *args: str, **kw) -> str:
@@ -50,7 +50,8 @@ def test_bus_benchmark_prints_the_floors_bare_zenoh_and_the_framework_side_by_si
 
 
 def test_planar_benchmark_prints_the_trial_ratios_beside_the_floors():
-    # the sweeps are whole `sfl run`s of the sweep protocol (tests/test_e2e.py runs one over two workers): skipped here
+    # the sweeps are whole `sfl run`s of the sweep protocol (tests/runtime/test_e2e.py runs one over two workers):
+    # skipped here
     out = bench("planar.py", "--repeats", "1", "--busy-repeats", "1", "--no-sweep")
     assert "load average" in out
     figures(out, r"\(c\)/\(b\) = ([\d.]+)", count=2)  # alone, and beside one busy process

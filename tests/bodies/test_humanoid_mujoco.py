@@ -26,7 +26,7 @@ from sfl_brain.protocols.local import run_local  # noqa: E402
 from sfl_brain.recording.records import read_records  # noqa: E402
 from sfl_brain.scenario import load  # noqa: E402
 
-from .conftest import ROOT, SCENARIOS, sfl_run  # noqa: E402
+from ..conftest import ROOT, SCENARIOS, sfl_run  # noqa: E402
 from .test_humanoid import INDEX, WEIGHT, Hold, run  # noqa: E402
 
 MUJOCO = "modules.body.params.physics=mujoco"

@@ -18,7 +18,7 @@ from sfl_brain.messages import TrialRequest
 from sfl_brain.modules.controllers.cpg import CPGController, CPGParams
 from sfl_brain.recording.records import read_records
 
-from .conftest import SCENARIOS, sfl_run
+from ..conftest import SCENARIOS, sfl_run
 
 SCENARIO = SCENARIOS / "humanoid_walk.yaml"
 

@@ -14,8 +14,8 @@ from sfl_brain.recording.records import read_records
 from sfl_brain.runtime.placement import usable_cpus
 from sfl_brain.scenario import load
 
-from .conftest import SCENARIOS, sfl_run
-from .test_e2e import rrd_rows, stable
+from ..conftest import SCENARIOS, sfl_run
+from ..runtime.test_e2e import rrd_rows, stable
 
 
 def trial(alpha, theta, slope=0.0, duration=10.0, seed=0):
@@ -205,7 +205,7 @@ def test_garbage_on_the_tick_keys_is_dropped_and_changes_nothing(tmp_path):
     from sfl_brain.messages import SCHEMA_VERSION, SensorFrame, encode
     from sfl_brain.runtime import bus
 
-    from .conftest import TickStranger, joined_run
+    from ..conftest import TickStranger, joined_run
 
     out = tmp_path / "run"
     sets = ["protocol.trials=10", "record.body_every=0"]
@@ -243,7 +243,7 @@ def test_garbage_on_the_tick_keys_is_dropped_and_changes_nothing(tmp_path):
     assert link.sent > 0 and counted.get("foreign", 0) > 0, counted
     assert "not the current trial's stream nonce" in (out / "logs" / "controller.log").read_text()
     # the body's end of the link connects to its controller only: none of it reached the body (its own checks:
-    # tests/test_placement_run.py)
+    # tests/runtime/test_placement_run.py)
     assert json.loads((out / "logs" / "body.counters.json").read_text())["dropped"] == {}
     local = run_local(load(SCENARIOS / "quickstart.yaml", sets))
     assert stable(local) == stable(read_records(out))

@@ -25,7 +25,7 @@ from sfl_brain.messages import TrialRequest
 from sfl_brain.signals import names
 from sfl_brain.telemetry import Arrows2D, CaptureTelemetry, Event, Scalars, Strips2D
 
-from .conftest import ROOT
+from ..conftest import ROOT
 
 JOINTS = ("trunk", "hip_l", "hip_r", "knee_l", "knee_r", "ankle_l", "ankle_r")
 VOLTS = tuple(f"v_{j}" for j in JOINTS)

@@ -25,7 +25,7 @@ from sfl_brain.modules.controllers.cpg import CPGController, CPGParams
 from sfl_brain.registry import resolve
 from sfl_brain.signals import names
 
-from .conftest import ROOT
+from ..conftest import ROOT
 
 LEGS = ["hip_l", "hip_r", "knee_l", "knee_r", "ankle_l", "ankle_r"]
 JOINTS = ("trunk", "hip_l", "hip_r", "knee_l", "knee_r", "ankle_l", "ankle_r")

@@ -17,7 +17,7 @@ from sfl_brain.body import Body, Controller, InProcessLink
 from sfl_brain.module import Module, on
 from sfl_brain.signals import Signal
 
-from .conftest import sfl_run
+from ..conftest import sfl_run
 
 NAN, INF = math.nan, math.inf
 

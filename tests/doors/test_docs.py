@@ -19,7 +19,7 @@ from sfl_brain.messages import TrialRequest
 from sfl_brain.registry import resolve
 from sfl_brain.telemetry import CaptureTelemetry, Rates
 
-from .conftest import ROOT, sfl
+from ..conftest import ROOT, sfl
 
 PAGE = ROOT / "docs" / "write-a-body.md"
 EXAMPLE = ROOT / "docs" / "examples" / "cartpole"
@@ -65,7 +65,7 @@ def test_the_body_and_the_controller_conform(impl):
 
 
 def test_the_pages_python_runs_as_shown(monkeypatch):
-    blocks = re.findall(r"<!-- run by tests/test_docs.py -->\n```python\n(.*?)```", page(), re.S)
+    blocks = re.findall(r"<!-- run by tests/doors/test_docs.py -->\n```python\n(.*?)```", page(), re.S)
     assert blocks, "the page marks no block to run"
     monkeypatch.chdir(ROOT)  # the page runs them from the checkout's root
     for block in blocks:

@@ -26,7 +26,7 @@ from sfl_brain.protocols.local import LocalModules
 from sfl_brain.scenario import ScenarioError, load
 from sfl_brain.signals import SENSOR_SLACK
 
-from .conftest import ROOT, SCENARIOS
+from ..conftest import ROOT, SCENARIOS
 
 WALKER = SCENARIOS / "e3_2_flat_s0.yaml"  # the planar reflex walker of chapter 3, learning (alpha_hip, theta_hip_max)
 HUMANOID = SCENARIOS / "e5_learn.yaml"  # the humanoid of chapter 5 on its CPG, (gain_pitch, gain_roll, sigma_s)
@@ -411,7 +411,7 @@ def test_registering_again_changes_nothing():
 
 @pytest.mark.parametrize("index", [0, 1])
 def test_the_pages_python_runs_and_prints_what_the_page_shows(index, monkeypatch):
-    marked = r"<!-- run by tests/test_gymnasium.py -->\n```python\n(.*?)```\n\n```text\n(.*?)```"
+    marked = r"<!-- run by tests/doors/test_gymnasium.py -->\n```python\n(.*?)```\n\n```text\n(.*?)```"
     runs = re.findall(marked, PAGE.read_text(), re.S)
     assert len(runs) == 2, "the page marks two blocks to run, each followed by what it prints"
     code, shown = runs[index]

@@ -17,7 +17,7 @@ from sfl_brain.body import InProcessLink
 from sfl_brain.messages import TrialRequest
 from sfl_brain.modules.controllers.cpg import CPGController, CPGParams
 
-from .conftest import SCENARIOS, sfl
+from ..conftest import SCENARIOS, sfl
 
 SCENARIO = SCENARIOS / "e4_2_learn.yaml"
 

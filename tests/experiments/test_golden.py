@@ -25,7 +25,7 @@ from pathlib import Path
 
 import pytest
 
-from .golden import CASES, platform_now, read_platform, read_snapshot, run_case, snapshots
+from ..golden import CASES, platform_now, read_platform, read_snapshot, run_case, snapshots
 
 #: record fields added after the first snapshot was written (issue 21: each map's winner for the trial's point)
 ADDED = {"success_winner", "failure_winner"}

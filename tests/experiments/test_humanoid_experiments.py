@@ -17,7 +17,7 @@ from sfl_brain.modules.cpg.patterns import PATTERN_POINTS
 from sfl_brain.report import poincare
 from sfl_brain.scenario import load
 
-from .conftest import SCENARIOS
+from ..conftest import SCENARIOS
 
 DT = 0.01
 

@@ -447,7 +447,8 @@ def test_phase_reset_pulses_on_heel_strike_and_can_be_switched_off():
     before, after = {}, {}
     for enabled in (True, False):
         network = CPGNetwork(circuit)
-        network.set_phase_reset("pulse")  # the circuit's own entries reset state (tests/test_cpg_phase_reset.py)
+        # the circuit's own entries reset state (tests/modules/test_cpg_phase_reset.py)
+        network.set_phase_reset("pulse")
         network.phase_reset_enabled[:] = enabled
         sensors = np.zeros(len(circuit.inputs))
         for tick in range(260):  # the circuit's resets fire after the start-up (its entries' `after`: 2 s)

@@ -21,8 +21,8 @@ from sfl_brain.modules.cpg import CPGNetwork
 from sfl_brain.modules.cpg.circuit import validate_circuit
 from sfl_brain.signals import names
 
+from ..bodies.test_humanoid_speed import Recording
 from .test_cpg import grid_circuit
-from .test_humanoid_speed import Recording
 
 pytest.importorskip("numba")
 

@@ -11,7 +11,7 @@ import pyarrow.parquet as pq
 from sfl_brain import messages as m
 from sfl_brain.modules.acc import ACC
 
-from .conftest import SCENARIOS, sfl_run
+from ..conftest import SCENARIOS, sfl_run
 
 
 def test_each_success_neuron_learns_the_eta_it_was_pulled_by():

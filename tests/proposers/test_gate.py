@@ -16,13 +16,13 @@ from sfl_brain.protocols.local import run_local
 from sfl_brain.recording.metrics import safe_learning
 from sfl_brain.scenario import ScenarioError, load
 
-from .conftest import ROOT, SCENARIOS, sfl
-from .golden import platform_now
-from .test_golden import differences
+from ..conftest import ROOT, SCENARIOS, sfl
+from ..experiments.test_golden import differences
+from ..golden import platform_now
 
 LEARN = SCENARIOS / "analytic_learn.yaml"
 GATED = ["cma", "tpe", "safe_bo"]
-GATE_OFF = ROOT / "tests" / "gate_off"
+GATE_OFF = ROOT / "tests" / "proposers" / "gate_off"
 
 
 class DiscGate:
@@ -214,8 +214,8 @@ def same_platform() -> bool:
 @pytest.mark.parametrize("kind", ["random", "cma", "tpe", "safe_bo"])
 def test_gate_off_gives_the_records_of_the_optimisers_before_the_gate(kind):
     """``gate: off`` (the default; written out here) asks the very points the code before issue 33 asked and gives
-    its records (``tests/gate_off``, written by that code), bit for bit on the platform that wrote them, but for one
-    documented change: a decision row's ``go`` is now the gate's real decision (d_f - d_s > s_vig), where it was
+    its records (``tests/proposers/gate_off``, written by that code), bit for bit on the platform that wrote them, but
+    for one documented change: a decision row's ``go`` is now the gate's real decision (d_f - d_s > s_vig), where it was
     always true."""
     proposer = (
         f"protocol.proposer.kind={kind}" if kind == "random" else f"protocol.proposer={{kind: {kind}, gate: off}}"

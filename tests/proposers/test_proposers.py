@@ -13,7 +13,7 @@ from sfl_brain.protocols.local import run_local
 from sfl_brain.recording.records import read_records
 from sfl_brain.scenario import ScenarioError, load
 
-from .conftest import SCENARIOS, sfl
+from ..conftest import SCENARIOS, sfl
 
 LEARN = SCENARIOS / "analytic_learn.yaml"
 UNGATED = ["random", "cma", "tpe", "safe_bo"]

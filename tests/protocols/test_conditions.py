@@ -17,7 +17,7 @@ from sfl_brain.protocols import condition_cases, repeat_seed
 from sfl_brain.report.conditions import Trials, fisher_exact, mcnemar_exact, pattern_space_paths, value_at, wilson
 from sfl_brain.scenario import PatternSpaceAnalysis
 
-from .conftest import SCENARIOS, sfl, sfl_run
+from ..conftest import SCENARIOS, sfl, sfl_run
 
 BASE = """
 name: cond

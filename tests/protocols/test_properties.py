@@ -15,7 +15,7 @@ import pytest
 from sfl_brain.protocols.local import run_local
 from sfl_brain.scenario import load
 
-from .conftest import SCENARIOS
+from ..conftest import SCENARIOS
 
 SCENARIO = SCENARIOS / "analytic_learn.yaml"
 CENTRE, RADIUS, PEAK, WIDTH = np.array([0.5, 0.5]), 0.3, np.array([0.6, 0.6]), 0.15

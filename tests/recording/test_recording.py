@@ -28,7 +28,7 @@ from sfl_brain.modules.controllers.reflex import ReflexController
 from sfl_brain.recording.rrlog import RerunLog, blueprint
 from sfl_brain.telemetry import FAILURE, SUCCESS, CaptureTelemetry, Event, MapSnapshots, Rates, Scalars, Strips2D
 
-from .conftest import SCENARIOS, sfl_run
+from ..conftest import SCENARIOS, sfl_run
 
 DURATION = 2.0  # s of simulated time per trial: 200 control ticks of 10 ms
 

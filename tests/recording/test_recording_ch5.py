@@ -21,7 +21,7 @@ from sfl_brain.recording.recorded import read_events, read_series
 from sfl_brain.recording.rrlog import blueprint, layout_of
 from sfl_brain.scenario import load
 
-from .conftest import SCENARIOS, sfl_run
+from ..conftest import SCENARIOS, sfl_run
 
 TRIALS = 4
 

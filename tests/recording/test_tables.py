@@ -24,7 +24,7 @@ from sfl_brain.recording.tables import (
 )
 from sfl_brain.telemetry import CaptureTelemetry, TelemetryTee
 
-from .conftest import ROOT, sfl
+from ..conftest import ROOT, sfl
 
 CAUTIOUS = ROOT / "docs" / "examples" / "cautious.yaml"
 

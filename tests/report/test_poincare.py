@@ -9,7 +9,7 @@ import pytest
 from sfl_brain.recording.recorded import read_series
 from sfl_brain.report.poincare import analyse, fit_return_map, section_returns
 
-from .conftest import SCENARIOS, sfl, sfl_run
+from ..conftest import SCENARIOS, sfl, sfl_run
 
 
 def test_the_section_and_the_fit_recover_a_known_contracting_map():

@@ -12,7 +12,7 @@ import pytest
 from sfl_brain.modules.cpg.patterns import PATTERN_POINTS
 from sfl_brain.report.cpg import Neuron, energy_order, joint_patterns
 
-from .conftest import SCENARIOS, sfl, sfl_run
+from ..conftest import SCENARIOS, sfl, sfl_run
 
 # (sigma_s, sigma_f) of each class (the digest's reference map, §1.7), and a faster oscillator
 KNOWN = {**PATTERN_POINTS, "faster oscillator": (5.0, 2.0)}

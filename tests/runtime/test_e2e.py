@@ -17,7 +17,7 @@ from sfl_brain.recording.records import read_records
 from sfl_brain.runtime import bus
 from sfl_brain.scenario import load
 
-from .conftest import ROOT, SCENARIOS, Lines, joined_run, sfl, sfl_run, start_sfl_run, wait_for_trials
+from ..conftest import ROOT, SCENARIOS, Lines, joined_run, sfl, sfl_run, start_sfl_run, wait_for_trials
 
 VOLATILE = {"wall_ms", "worker"}
 

@@ -12,7 +12,7 @@ from sfl_brain.protocols.local import run_local
 from sfl_brain.recording.records import read_records
 from sfl_brain.scenario import load
 
-from .conftest import SCENARIOS, start_sfl_run, wait_for_trials
+from ..conftest import SCENARIOS, start_sfl_run, wait_for_trials
 
 VOLATILE = {"wall_ms", "worker"}
 WALKER = SCENARIOS / "quickstart.yaml"

@@ -23,7 +23,7 @@ from sfl_brain.runtime.liveness import CpuSample, NoProgressClock, cpu_sample, h
 from sfl_brain.runtime.placement import usable_cpus
 from sfl_brain.scenario import load
 
-from .conftest import SCENARIOS, Lines, poll_until, start_sfl_run, wait_for_trials
+from ..conftest import SCENARIOS, Lines, poll_until, start_sfl_run, wait_for_trials
 from .test_faults import module_process
 
 WALKER = SCENARIOS / "quickstart.yaml"

@@ -10,7 +10,7 @@ from sfl_brain.runtime.placement import Pair, Placement, cpu_list, place
 from sfl_brain.runtime.supervisor import lockstep_pairs
 from sfl_brain.scenario import load
 
-from .conftest import SCENARIOS
+from ..conftest import SCENARIOS
 
 PAIR = [Pair("body", "controller")]
 BRAIN = ["acc", "vigilance", "ofc"]

@@ -12,7 +12,7 @@ from sfl_brain.recording.records import read_records
 from sfl_brain.runtime.placement import Pair, place, usable_cpus
 from sfl_brain.scenario import load
 
-from .conftest import SCENARIOS, all_cores, on_all_cores, sfl_run
+from ..conftest import SCENARIOS, all_cores, on_all_cores, sfl_run
 
 QUICK = SCENARIOS / "quickstart.yaml"
 SETS = ("protocol.trials=6", "record.body_every=0", "modules.body.params.duration=3")
@@ -100,7 +100,7 @@ def test_a_pairs_core_that_other_work_comes_to_keep_busy_makes_the_placement_yie
     from sfl_brain.runtime.processes import Child
     from sfl_brain.runtime.supervisor import Supervisor
 
-    from .conftest import poll_until
+    from ..conftest import poll_until
 
     plan = load(QUICK, list(SETS))
     cores = all_cores()

@@ -13,7 +13,7 @@ from pathlib import Path
 from sfl_brain.protocols.local import run_local
 from sfl_brain.scenario import load
 
-from .conftest import SCENARIOS, poll_until, sfl, sfl_run, start_sfl_run, trials_recorded
+from ..conftest import SCENARIOS, poll_until, sfl, sfl_run, start_sfl_run, trials_recorded
 
 LEARN = SCENARIOS / "analytic_learn.yaml"
 TRIALS = 40
@@ -38,7 +38,7 @@ def stop_after(out: Path, trials: int, sets: tuple[str, ...], signum: int) -> su
 
 def uninterrupted(sets: tuple[str, ...]) -> list[dict]:
     """The rows (without wall times) and summary of the same run uninterrupted, in one process (the records are
-    the same as over processes: tests/test_e2e.py)."""
+    the same as over processes: tests/runtime/test_e2e.py)."""
     with tempfile.TemporaryDirectory() as tmp:
         rows = run_local(load(LEARN, list(sets)), Path(tmp))
     for row in rows:
@@ -49,7 +49,7 @@ def uninterrupted(sets: tuple[str, ...]) -> list[dict]:
 def test_an_interrupted_learn_run_resumes_to_the_records_of_an_uninterrupted_one(tmp_path):
     """CMA-ES behind the gate (veto: the replay asks the gate again, and its vetoes are told again), Ctrl-C (the
     thesis's own proposer is resumed after a kill -9 below; CMA-ES without the gate asks as before the gate,
-    tests/test_gate.py)."""
+    tests/proposers/test_gate.py)."""
     sets = (f"protocol.trials={TRIALS}", "protocol.proposer={kind: cma, gate: veto}")
     whole = tmp_path / "whole"
     assert sfl_run(LEARN, whole, *sets).returncode == 0

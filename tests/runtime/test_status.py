@@ -18,7 +18,7 @@ from sfl_brain.events import Progress
 from sfl_brain.recording.records import RecordWriter, inspect_run, read_records
 from sfl_brain.status import EnvironmentProblem
 
-from .conftest import ROOT, SCENARIOS, sfl, sfl_run, wait_for_trials
+from ..conftest import ROOT, SCENARIOS, sfl, sfl_run, wait_for_trials
 
 ANALYTIC = SCENARIOS / "analytic_learn.yaml"
 STALLING = ("modules.vigilance.params.value=1.5", "protocol.max_decisions=2000")

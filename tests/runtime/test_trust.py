@@ -16,7 +16,7 @@ from sfl_brain.recording.records import read_records
 from sfl_brain.runtime import bus
 from sfl_brain.scenario import load
 
-from .conftest import SCENARIOS, TickStranger, listening_run
+from ..conftest import SCENARIOS, TickStranger, listening_run
 
 VOLATILE = {"wall_ms", "worker"}
 # a short walker run: 5 processes (body and controller apart), 300 ticks a trial

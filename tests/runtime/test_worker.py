@@ -9,7 +9,7 @@ import sys
 
 from sfl_brain.runtime import bus
 
-from .conftest import ROOT, SCENARIOS, Lines, listening_run, sfl
+from ..conftest import ROOT, SCENARIOS, Lines, listening_run, sfl
 
 SWEEP = SCENARIOS / "analytic_sweep.yaml"
 LEARN = SCENARIOS / "analytic_learn.yaml"

@@ -7,7 +7,7 @@ import yaml
 
 from sfl_brain.scenario import ScenarioError, load
 
-from .conftest import SCENARIOS, sfl
+from ..conftest import SCENARIOS, sfl
 
 BASE = """
 name: t
@@ -202,7 +202,7 @@ def test_set_overrides_are_validated_too():
 
 
 def test_lockstep_processes_are_the_body_workers_and_their_controller_processes():
-    """Where they run is tests/test_placement.py's."""
+    """Where they run is tests/runtime/test_placement.py's."""
     quick = SCENARIOS / "quickstart.yaml"
     assert load(quick).lockstep_processes == ["body", "controller"]  # ACC, vigilance, OFC exchange no ticks
     assert load(quick).scenario.lockstep.pin_cpus == "auto"  # each pair on a core of its own

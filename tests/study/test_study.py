@@ -33,7 +33,7 @@ from sfl_brain.report.study import (
 from sfl_brain.status import BadInput
 from sfl_brain.study.study import TrialCounter, core_slots, first_difference, parse_seeds, parse_vary
 
-from .conftest import ROOT, SCENARIOS, sfl, wait_for_trials
+from ..conftest import ROOT, SCENARIOS, sfl, wait_for_trials
 
 LEARN = SCENARIOS / "analytic_learn.yaml"
 

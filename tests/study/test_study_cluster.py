@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from .conftest import SCENARIOS, sfl
+from ..conftest import SCENARIOS, sfl
 
 pytest.importorskip("distributed", reason="sfl study --cluster needs sfl-brain[cluster]")
 
