@@ -116,28 +116,43 @@ def door_vs_body(rounds: int, block: int) -> None:
             v.env.close()
 
 
-def vector_scaling(steps: int) -> None:
+def vector_scaling(steps: int, rounds: int = 3) -> None:
+    """Steps per wall second of 1 env and of one env per usable core, measured in turn ``rounds`` times (medians).
+    Every env of both vectors is given the same actions, so each walks the same episodes (falls and resets alike)
+    and the two vectors do the same work per env."""
     cores = len(usable_cpus()) or os.cpu_count() or 1
     scenario = str(BODIES[0][1])
-    print(f"\nvector env of Tick-v0 planar walkers (AsyncVectorEnv, a process each), {steps} steps per env:")
-    rates = {}
-    for n in sorted({1, cores}):
-        env = gym.vector.AsyncVectorEnv([lambda: gym.make("sfl/Tick-v0", scenario=scenario) for _ in range(n)])
-        env.reset(seed=0)
-        rng = np.random.default_rng(0)
-        actions = rng.uniform(
-            env.single_action_space.low, env.single_action_space.high, (256, n, env.single_action_space.shape[0])
-        )
-        for i in range(50):
-            env.step(actions[i % 256])
-        start = time.perf_counter()
-        for i in range(steps):
-            env.step(actions[i % 256])
-        rates[n] = n * steps / (time.perf_counter() - start)
-        env.close()
-        print(f"  {n} env{'s' if n > 1 else ' '}: {rates[n]:8.0f} steps per wall s")
+    print(
+        f"\nvector env of Tick-v0 planar walkers (AsyncVectorEnv, a process each), {steps} steps per env, "
+        f"the same actions in every env, {rounds} rounds in turn:"
+    )
+    sizes = sorted({1, cores})
+    envs = {
+        n: gym.vector.AsyncVectorEnv([lambda: gym.make("sfl/Tick-v0", scenario=scenario) for _ in range(n)])
+        for n in sizes
+    }
+    space = envs[1].single_action_space
+    actions = np.random.default_rng(0).uniform(space.low, space.high, (256, space.shape[0]))
+    rates: dict[int, list[float]] = {n: [] for n in sizes}
+    try:
+        for _ in range(rounds):
+            for n, env in envs.items():
+                env.reset(seed=0)
+                for i in range(50):
+                    env.step(np.repeat(actions[i % 256][None], n, axis=0))
+                start = time.perf_counter()
+                for i in range(steps):
+                    env.step(np.repeat(actions[i % 256][None], n, axis=0))
+                rates[n].append(n * steps / (time.perf_counter() - start))
+    finally:
+        for env in envs.values():
+            env.close()
+    for n in sizes:
+        each = ", ".join(f"{r:.0f}" for r in rates[n])
+        print(f"  {n} env{'s' if n > 1 else ' '}: median {np.median(rates[n]):8.0f} steps per wall s ({each})")
     if cores > 1:
-        print(f"  speed-up with {cores} envs on {cores} usable cores: {rates[cores] / rates[1]:.2f}x")
+        ratio = np.median(rates[cores]) / np.median(rates[1])
+        print(f"  speed-up with {cores} envs on {cores} usable cores: {ratio:.2f}x (ideal {cores}x)")
 
 
 def main() -> None:
