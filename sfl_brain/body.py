@@ -265,6 +265,7 @@ class Body(Module):
             quality=float(quality),
             metrics=metrics,
             worker=self.worker,
+            sim_s=tick * self.params.control_dt,
         )
 
 

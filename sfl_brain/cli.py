@@ -128,8 +128,11 @@ def run_command(
     else:
         plan = _load_or_exit(scenario, overrides, seed)
     # the runtime (Zenoh, Rerun, pyarrow: about 1.5 s of imports) only once the scenario is known to be good
+    from .recording.budget import TimeBudget, process_age
     from .runtime.progress import ProgressView
     from .runtime.run import run
+
+    budget = TimeBudget(launched=process_age())  # the time budget's start-up begins at this process's launch
 
     view = ProgressView(plan, enabled=not quiet)
 
@@ -161,6 +164,7 @@ def run_command(
                 on_ready=ready,
                 zenoh_config=zenoh_config,
                 resume=resumed,
+                budget=budget,
             )
         )
     view.report(run_dir, summary)
@@ -415,9 +419,16 @@ def inspect(run_dir: Path, as_json: bool) -> None:
     if as_json:
         click.echo(json.dumps(summary))
         return
+    budget = summary.pop("time_budget", None)
     width = max(16, *map(len, summary))
     for k, v in summary.items():
         click.echo(f"{k:>{width}}: {v:.4g}" if isinstance(v, float) else f"{k:>{width}}: {v}")
+    if budget is not None:
+        from .recording.budget import budget_lines
+
+        click.echo(f"{'time_budget':>{width}}: where the wall time went (seconds, share)")
+        for line in budget_lines(budget):
+            click.echo(f"{'':>{width - 8}}{line}")
 
 
 @main.command()

@@ -620,13 +620,19 @@ class TrialRequest(Message, kw_only=True):
 
 @message("body.result")
 class TrialResult(Message, kw_only=True):
-    """Outcome of a trial: success, quality eta, and body metrics (distance, velocity, ...)."""
+    """Outcome of a trial: success, quality eta, and body metrics (distance, velocity, ...); what it cost."""
 
     trial_id: int
     success: bool
     quality: float
     metrics: dict
     worker: str
+    #: simulated seconds the body ran (control ticks x control_dt; 0 for a body without a clock, e.g. analytic)
+    sim_s: float = 0.0
+    #: CPU seconds the body worker's process spent on the trial (with a controller hosted in it); None: not measured
+    cpu_body_s: float | None = None
+    #: CPU seconds the controller's own process spent on the trial; None: hosted in the body's process, or unknown
+    cpu_controller_s: float | None = None
 
 
 @message("controller.reset")

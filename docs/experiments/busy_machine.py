@@ -53,7 +53,7 @@ BODIES = {
     ),
 }
 RECORD = ["record.body_every=5"]
-WALL = {"wall_ms", "worker"}
+WALL = {"wall_ms", "worker", "cpu_body_s", "cpu_controller_s"}
 SPIN = [sys.executable, "-c", "while True: pass"]
 
 

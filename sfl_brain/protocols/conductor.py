@@ -19,6 +19,7 @@ import numpy as np
 
 from .. import messages as m
 from ..events import DecisionsMade, Events, Progress, ProgressUpdated, TrialInterrupted, TrialRecorded
+from ..recording.budget import TimeBudget
 from ..recording.records import point_fields, trial_row
 from ..scenario.plan import Plan
 from .service import Interrupted, ModuleService, RunError
@@ -36,10 +37,17 @@ class Conductor:
 
     ``replay``: the trial rows of an interrupted learn run (``sfl run --resume``), which ``run_learn`` replays
     before it goes on. While ``replaying``, nothing is published: the rows are in the records already.
+    ``budget``: where the time in trials and records is counted (the protocol counts its decisions and learning).
     """
 
     def __init__(
-        self, plan: Plan, modules: ModuleService, events: Events, run_dir: Path, replay: list[dict] | None = None
+        self,
+        plan: Plan,
+        modules: ModuleService,
+        events: Events,
+        run_dir: Path,
+        replay: list[dict] | None = None,
+        budget: TimeBudget | None = None,
     ) -> None:
         self.plan = plan
         self.modules = modules
@@ -48,6 +56,7 @@ class Conductor:
         self.providers = plan.providers
         self.replay = list(replay or [])
         self.replaying = False
+        self.budget = budget or TimeBudget()
 
     def call(self, message: m.Message) -> m.Message:
         return self.call_all(message)[0]
@@ -85,7 +94,8 @@ class Conductor:
             while todo and idle:
                 worker = idle.pop(0)
                 request = todo.popleft()
-                ticket = self.modules.submit(worker, request, timeout)
+                with self.budget.part("trials"):
+                    ticket = self.modules.submit(worker, request, timeout)
                 busy[ticket] = (worker, request, time.perf_counter())
             if not busy:
                 if self.modules.coming():  # a body worker or controller restarting: waited for while it starts
@@ -94,10 +104,13 @@ class Conductor:
                     deadline_no_worker = deadline_no_worker or time.monotonic() + self.plan.scenario.timeouts.ready
                     if time.monotonic() > deadline_no_worker:
                         raise RunError("no body worker is alive to run trials")
-                self.modules.wait_for_workers(0.5)
+                with self.budget.part("trials"):
+                    self.modules.wait_for_workers(0.5)
                 continue
             deadline_no_worker = None
-            for ticket, outcome in self.modules.wait_any(list(busy)):
+            with self.budget.part("trials"):  # the waits only: a part must not stay open across the yield
+                finished = list(self.modules.wait_any(list(busy)))
+            for ticket, outcome in finished:
                 worker, request, started = busy.pop(ticket)
                 if isinstance(outcome, Interrupted):
                     retries[request.trial_id] += 1
@@ -113,8 +126,9 @@ class Conductor:
     def _publish(self, *events) -> None:
         """Publish ``events``, unless the run is replaying recorded trials (they are in the records already)."""
         if not self.replaying:
-            for event in events:
-                self.events.publish(event)
+            with self.budget.part("records"):
+                for event in events:
+                    self.events.publish(event)
 
     def record_decisions(self, rows: list[dict]) -> None:
         self._publish(DecisionsMade(rows))

@@ -15,7 +15,7 @@ from .. import messages as m
 from ..events import Progress
 from ..proposers import PROPOSERS, Outcome, Proposer
 from ..recording.metrics import safe_learning
-from ..recording.records import decision_row, plain, point_fields
+from ..recording.records import NOT_REPRODUCIBLE, decision_row, plain, point_fields
 from ..scenario.plan import Plan
 from .conductor import Conductor
 from .service import RunError
@@ -78,11 +78,13 @@ def run_learn(c: Conductor) -> dict:
     the gate (:mod:`sfl_brain.proposers`). The brain modules learn from every trial either way.
     """
     proto = c.plan.scenario.protocol
-    proposer = make_proposer(c)
+    budget = c.budget  # where the time goes: the conductor counts the trials and records, this cycle the rest
     progress = Progress(planned=proto.trials)
-    if proposer.GATED:
-        progress.max_decisions, progress.stall_decisions = proto.max_decisions, proto.stall_decisions
-    gate = Gate(c, progress)
+    with budget.part("decisions"):
+        proposer = make_proposer(c)
+        if proposer.GATED:
+            progress.max_decisions, progress.stall_decisions = proto.max_decisions, proto.stall_decisions
+        gate = Gate(c, progress)
     reach = body_reach(c.plan)
     n_success = n_failure = 0
     best: tuple[float, int, np.ndarray] | None = None  # (eta, trial, v) of the highest-reward success
@@ -95,7 +97,8 @@ def run_learn(c: Conductor) -> dict:
     while progress.trials < proto.trials:
         c.replaying = progress.trials < len(c.replay)  # a resumed run's recorded trials: learnt again, not re-run
         started = time.perf_counter()
-        v = proposer.ask(gate)
+        with budget.part("decisions"):
+            v = proposer.ask(gate)
         asking += time.perf_counter() - started
         if v is None:
             if c.replaying:
@@ -108,21 +111,23 @@ def run_learn(c: Conductor) -> dict:
         else:
             ((request, result, wall),) = c.trials([c.trial_request(trial_id, v, c.should_log_body(trial_id))])
         eta = float(result.quality) if result.success else None
-        rho = c.call(m.Grade(eta=result.quality)).rho if result.success else None
+        with budget.part("learning"):
+            rho = c.call(m.Grade(eta=result.quality)).rho if result.success else None
         n_success += int(result.success)
         n_failure += int(not result.success)
         s_vig_used, low, high = gate.threshold.s_vig, gate.threshold.low, gate.threshold.high
         if result.success and (best is None or eta > best[0]):
             best = (eta, trial_id, v.copy())  # the highest-reward trial so far (L1584)
-        learned, gate.threshold = c.call_all(  # ACC and vigilance learn from the trial in parallel
-            m.Learn(v=v, success=result.success, rho=rho if rho is not None else 1.0, eta=eta),
-            m.TrialDone(trial_index=trial_id + 1, success=result.success, n_success=n_success, n_failure=n_failure),
-        )
-        started = time.perf_counter()
-        proposer.tell(v, Outcome(result.success, eta, None if result.success else trial_progress(result, reach)))
-        if not c.replaying:  # the checkpoint of the trial the records end with is on disk already
-            proposer.checkpoint(c.run_dir / PROPOSER_CHECKPOINT)
-        telling += time.perf_counter() - started
+        with budget.part("learning"):
+            learned, gate.threshold = c.call_all(  # ACC and vigilance learn from the trial in parallel
+                m.Learn(v=v, success=result.success, rho=rho if rho is not None else 1.0, eta=eta),
+                m.TrialDone(trial_index=trial_id + 1, success=result.success, n_success=n_success, n_failure=n_failure),
+            )
+            started = time.perf_counter()
+            proposer.tell(v, Outcome(result.success, eta, None if result.success else trial_progress(result, reach)))
+            if not c.replaying:  # the checkpoint of the trial the records end with is on disk already
+                proposer.checkpoint(c.run_dir / PROPOSER_CHECKPOINT)
+            telling += time.perf_counter() - started
         progress.s_vig = gate.threshold.s_vig
         trial_decisions.append(gate.decision - decisions_at_last_trial)
         decisions_at_last_trial = gate.decision
@@ -146,7 +151,8 @@ def run_learn(c: Conductor) -> dict:
         tried.append(progress.last)
     c.replaying = False
     maps = (c.run_dir / "acc.npz").resolve()
-    finish: m.Ack = c.call(m.Finish(path=str(maps), prune=proto.prune_failure_map))
+    with budget.part("learning"):  # the ACC prunes its failure map and saves both
+        finish: m.Ack = c.call(m.Finish(path=str(maps), prune=proto.prune_failure_map))
     return {
         "planned_trials": proto.trials,
         "stalled": stalled,
@@ -202,6 +208,9 @@ def recorded_trial(trial: int, v: np.ndarray, row: dict) -> tuple[m.TrialResult,
         quality=float("nan") if quality is None else float(quality),
         metrics=metrics,
         worker=str(row.get("worker", "")),
+        sim_s=float(row.get("sim_s") or 0.0),
+        cpu_body_s=row.get("cpu_body_s"),
+        cpu_controller_s=row.get("cpu_controller_s"),
     )
     return result, float(row.get("wall_ms") or 0.0) / 1e3
 
@@ -210,8 +219,10 @@ def check_replayed(trial: int, row: dict, recorded: dict) -> None:
     """A replayed trial's row must be the recorded one (its decision, vigilance, the maps' change...): else the
     brain modules did not reach the state they had."""
     replayed = json.loads(json.dumps(plain(row)))
+    if "sim_s" not in recorded:  # records written before trial rows had it
+        replayed.pop("sim_s", None)
     for key in sorted(set(replayed) | set(recorded)):
-        if key != "wall_ms" and replayed.get(key) != recorded.get(key):
+        if key not in NOT_REPRODUCIBLE and replayed.get(key) != recorded.get(key):
             raise RunError(replay_diverged(trial, f"{key} is {replayed.get(key)!r}, recorded {recorded.get(key)!r}"))
 
 

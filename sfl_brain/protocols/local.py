@@ -11,11 +11,14 @@ from __future__ import annotations
 
 import json
 import tempfile
+import time
 from pathlib import Path
+
+import msgspec
 
 from ..body import Body, InProcessLink
 from ..events import Events
-from ..messages import Message, decode, encode
+from ..messages import Message, TrialResult, decode, encode
 from ..module import Module
 from ..recording.records import RecordWriter, read_records, record_to
 from ..registry import resolve
@@ -62,10 +65,13 @@ class LocalModules:
 
     def _deliver(self, target: str, message: Message) -> Message:
         module = self.modules[target]
+        started = time.process_time()
         if self.through_codec:
             reply = decode(encode(module.handle(decode(encode(message)), checked=True)))
         else:
             reply = module.handle(message)
+        if isinstance(reply, TrialResult):  # the one process's CPU seconds, its controller's included
+            reply = msgspec.structs.replace(reply, cpu_body_s=time.process_time() - started)
         module.run_deferred()
         return reply
 

@@ -41,6 +41,10 @@ SUMMARY_FIELDS = (
 )
 
 
+#: the fields of a trial row that are not reproducible: the wall clock, the CPU clocks, which worker ran the trial
+NOT_REPRODUCIBLE = ("wall_ms", "worker", "cpu_body_s", "cpu_controller_s")
+
+
 def plain(value: Any) -> Any:
     """``value`` as JSON holds it in the records: numpy values as Python's, a non-finite float as None."""
     if isinstance(value, np.ndarray):
@@ -119,7 +123,7 @@ def trial_row(
     point: dict | None = None,
     learning: dict | None = None,
 ) -> dict:
-    """One ``kind: trial`` row: the outcome, the worker and its wall time, the success rate so far,
+    """One ``kind: trial`` row: the outcome, the worker, its wall, simulated and CPU seconds, the success rate so far,
     where it was tried (``point``, :func:`point_fields`; none for the exploit walk), the learning
     state after it (``learning``: learn protocol) and the body's metrics as ``m_<name>``."""
     return {
@@ -129,6 +133,9 @@ def trial_row(
         "quality": result.quality,
         "worker": result.worker,
         "wall_ms": wall_s * 1e3,
+        "sim_s": result.sim_s,
+        "cpu_body_s": result.cpu_body_s,
+        "cpu_controller_s": result.cpu_controller_s,
         "success_rate": success_rate,
         **(learning or {}),
         **(point or {}),
@@ -203,7 +210,7 @@ def summarise(rows: list[dict], wall_time_s: float | None = None) -> dict:
 
 def inspect_run(run_dir: Path) -> dict:
     """Summary of a finished, stopped or killed run: status and stop reason first, then the counts
-    rebuilt from the records."""
+    rebuilt from the records, and last the ``time_budget`` of a run that wrote its summary."""
     run_dir = Path(run_dir)
     if not (run_dir / "records.jsonl").exists():
         raise FileNotFoundError(f"{run_dir}: no records.jsonl (is this a run folder?)")
@@ -241,6 +248,8 @@ def inspect_run(run_dir: Path) -> dict:
     out = {**head, **counts}
     if damage:
         out["records_damage"] = "; ".join(damage)
+    if isinstance(stored.get("time_budget"), dict):  # where the wall time went (sfl_brain.recording.budget)
+        out["time_budget"] = stored["time_budget"]
     return out
 
 

@@ -40,6 +40,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import msgspec
 import zenoh
 
 from ..body import Body, Controller, InProcessLink
@@ -50,6 +51,8 @@ from ..messages import (
     MotorCommand,
     NonFiniteError,
     SensorFrame,
+    TrialRequest,
+    TrialResult,
     decode,
     decoder_for,
     encode,
@@ -59,7 +62,7 @@ from ..registry import resolve
 from ..telemetry import Rates, TelemetryTee
 from . import bus, ticklink
 from .bus import NoReply, RemoteError
-from .liveness import ProgressSlot
+from .liveness import ProgressSlot, cpu_sample
 from .placement import pin
 from .ticklink import (
     BusLink,
@@ -453,7 +456,7 @@ class Host:
                 self.drops("stale", "request", f"on {query.key_expr}: a replayed request")
                 return
             msg = decode(body)
-            reply = self.module.handle(msg, checked=True)
+            reply = self._trial(msg) if type(msg) is TrialRequest else self.module.handle(msg, checked=True)
             self.progress()
             if type(msg) is ControllerReset:  # the trial whose frames this controller answers from now on
                 self._stream = [nonce, msg.trial_id, 0]
@@ -467,6 +470,29 @@ class Host:
                 query.reply_err(self.seal.seal_reply(nonce, f"{type(exc).__name__}: {exc}".encode()))
         finally:
             query.drop()
+
+    def _trial(self, request: TrialRequest) -> TrialResult:
+        """Run a trial on this body worker and say what it cost: the CPU seconds of this process (a controller hosted
+        in it included) and of its controller's own process, read around the whole trial, never per tick."""
+        controller = self._controller_cpu()
+        started = time.process_time()
+        result = self.module.handle(request, checked=True)
+        cpu_body = time.process_time() - started
+        if isinstance(result, TrialResult):
+            ended = self._controller_cpu()
+            same = controller is not None and ended is not None and controller[0] == ended[0]
+            result = msgspec.structs.replace(
+                result, cpu_body_s=cpu_body, cpu_controller_s=ended[1] - controller[1] if same else None
+            )
+        return result
+
+    def _controller_cpu(self) -> tuple[int, float] | None:
+        """(pid, CPU seconds so far) of this body worker's controller process; None for a controller hosted here, one
+        of a host started by hand (no progress board) or a process that cannot be read."""
+        find = self.controller_pid() if self._colocated is None and self.link is not None else None
+        pid = find() if find is not None else 0
+        sample = cpu_sample(pid) if pid > 0 else None
+        return (pid, sample.cpu) if sample is not None else None
 
     def _stream_loop(self, subscriber, message_type: type[Message]) -> None:
         """Answer lockstep stream messages arriving on a Zenoh subscriber (:meth:`_stream_reply`); publish

@@ -53,6 +53,7 @@ from ..events import (
 from ..protocols import PROTOCOLS
 from ..protocols.conductor import Conductor
 from ..protocols.service import RunError
+from ..recording.budget import TimeBudget
 from ..recording.provenance import provenance
 from ..recording.records import RecordWriter, read_records, record_to, run_status, summarise
 from ..recording.rrlog import RERUN_FLUSH_TIMEOUT, RerunLog, layout_of
@@ -349,46 +350,52 @@ def run(
     on_ready: Callable[[Supervisor, float], None] | None = None,
     zenoh_config: str | Path | None = None,
     resume: Resume | None = None,
+    budget: TimeBudget | None = None,
 ) -> tuple[Path, dict]:
     """Run a scenario plan to its end; returns (run folder, summary). ``resume``: go on with the interrupted learn
-    run in ``out`` (:func:`prepare_resume`) instead of starting a new folder.
+    run in ``out`` (:func:`prepare_resume`) instead of starting a new folder. ``budget``: where the run's wall time
+    is counted (``sfl run`` passes one that counts its process's launch as start-up); a new one by default.
 
     Raises :class:`BadInput` or :class:`EnvironmentProblem` only before anything started (a run
     folder that holds a run or cannot be written, no display for ``--viewer``). After that it
     raises nothing: the summary's ``status`` is ``completed``, ``stalled``, ``failed`` or
     ``interrupted``, with ``stop_reason`` and the ``exit_code`` the CLI ends with.
     """
+    budget = budget or TimeBudget()  # where this invocation's wall time goes, up to the summary
     run_dir = Path(out) if out else default_run_dir(plan)
-    run_id, viewer_url, earlier = _open_run_dir(plan, run_dir, viewer, resume)
-    writer = RecordWriter(run_dir / "records.jsonl")
-    events = Events()
-    sup = Supervisor(
-        plan,
-        run_dir,
-        run_id,
-        listen=listen,
-        connect=connect,
-        viewer=viewer_url,
-        realtime=realtime,
-        zenoh_config=zenoh_config,
-        events=events,
-    )
-    rr_log = _rerun_log(plan, run_dir, run_id, viewer_url, resume)
-    _subscribe(events, plan, writer, rr_log, on_progress)
+    with budget.part("startup"):
+        run_id, viewer_url, earlier = _open_run_dir(plan, run_dir, viewer, resume)
+        writer = RecordWriter(run_dir / "records.jsonl")
+        events = Events()
+        sup = Supervisor(
+            plan,
+            run_dir,
+            run_id,
+            listen=listen,
+            connect=connect,
+            viewer=viewer_url,
+            realtime=realtime,
+            zenoh_config=zenoh_config,
+            events=events,
+        )
+        rr_log = _rerun_log(plan, run_dir, run_id, viewer_url, resume)
+        _subscribe(events, plan, writer, rr_log, on_progress)
     started = time.perf_counter()
     with _Stopping(sup) as stopping:
         ended = _Ended()
         try:
-            ended = _conduct(plan, sup, events, run_dir, resume, on_ready, started)
+            ended = _conduct(plan, sup, events, run_dir, resume, on_ready, started, budget)
         finally:
             stopping.cleaning = True
-            cleanup = _close(plan, run_dir, sup, writer, rr_log, ended, stopping)
-    rows = read_records(run_dir)
+            cleanup = _close(plan, run_dir, sup, writer, rr_log, ended, stopping, budget)
+    with budget.part("records"):
+        rows = read_records(run_dir)
     _judge_run(ended, rows, cleanup, stopping)
     wall = time.perf_counter() - started
     if resume is not None:  # the time it had taken before, and where it went on from
         wall += resume.wall_time_s or 0.0
         ended.extra = ended.extra | {"resumed_from_trial": len(resume.trials), "previous_recordings": earlier}
+    ended.extra = ended.extra | {"time_budget": budget.summary()}
     return run_dir, _write_summary(plan, run_dir, sup, run_id, ended, rows, wall)
 
 
@@ -498,13 +505,15 @@ def _conduct(
     resume: Resume | None,
     on_ready: Callable[[Supervisor, float], None] | None,
     started: float,
+    budget: TimeBudget,
 ) -> _Ended:
     """Start the module processes and run the protocol; how that ended (a fault or a signal is a status, not raised)."""
     try:
-        sup.start()
+        with budget.part("startup"):
+            sup.start()
         if on_ready:
             on_ready(sup, time.perf_counter() - started)
-        conductor = Conductor(plan, sup, events, run_dir, replay=resume.trials if resume else None)
+        conductor = Conductor(plan, sup, events, run_dir, replay=resume.trials if resume else None, budget=budget)
         return _Ended(extra=PROTOCOLS[plan.scenario.protocol.kind](conductor))
     except (KeyboardInterrupt, _Terminate):
         return _Ended(status=RunStatus.INTERRUPTED, reason="stopped by signal (Ctrl-C or SIGTERM)")
@@ -531,20 +540,22 @@ def _close(
     rr_log: RerunLog,
     ended: _Ended,
     stopping: _Stopping,
+    budget: TimeBudget,
 ) -> list[str]:
     """Stop the modules, close the records and the Rerun log, merge the recording and write the tables; what went
     wrong doing so, one line each. Every step runs whatever the others did: a full disk must not cost the summary."""
     cleanup = []
-    for step in (
-        lambda: sup.stop(grace=0.0 if stopping.signals > 1 else 3.0),
-        writer.close,
+    for part, step in (
+        ("shutdown", lambda: sup.stop(grace=0.0 if stopping.signals > 1 else 3.0)),
+        ("records", writer.close),
         # a full disk: rerun's writer has stopped, do not wait the healthy disk's time for it
-        lambda: rr_log.close(timeout=2.0 if ended.exit_code == EXIT_ENVIRONMENT else RERUN_FLUSH_TIMEOUT),
-        lambda: merge_recordings(run_dir),
-        lambda: write_tables(run_dir, plan.raw.get("space", []), plan.body_class.METRICS),
+        ("records", lambda: rr_log.close(timeout=2.0 if ended.exit_code == EXIT_ENVIRONMENT else RERUN_FLUSH_TIMEOUT)),
+        ("records", lambda: merge_recordings(run_dir)),
+        ("records", lambda: write_tables(run_dir, plan.raw.get("space", []), plan.body_class.METRICS)),
     ):
         try:
-            step()
+            with budget.part(part):
+                step()
         except Exception as exc:  # noqa: BLE001 - reported in the summary, never raised
             cleanup.append(f"{type(exc).__name__}: {exc}")
             _log_internal(run_dir)

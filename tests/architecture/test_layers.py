@@ -46,8 +46,8 @@ ZENOH_SIDE = (
 
 
 def stable(rows):
-    """Rows without their wall times."""
-    return [{k: v for k, v in r.items() if k != "wall_ms"} for r in rows]
+    """Rows without their wall and CPU times."""
+    return [{k: v for k, v in r.items() if k not in ("wall_ms", "cpu_body_s", "cpu_controller_s")} for r in rows]
 
 
 def python(code: str) -> subprocess.CompletedProcess:

@@ -22,8 +22,11 @@ CASES = {
     "e3_1_viability": ("scenarios/e3_1_viability.yaml", ["space.0.steps=4", "space.1.steps=3"]),
 }
 
-#: the fields of a row that are not reproducible at all (the wall clock, which worker ran the trial)
-UNSTABLE = ("wall_ms", "worker")
+#: the fields of a row that are not reproducible at all (the wall and CPU clocks, which worker ran the trial)
+UNSTABLE = ("wall_ms", "worker", "cpu_body_s", "cpu_controller_s")
+
+#: the fields of a row that the snapshots were written before (reproducible, but not in them)
+NEWER = ("sim_s",)
 
 #: the distributions that compute a golden case's numbers besides numpy (its version is in the numeric platform)
 COMPUTING = ("pymunk",)
@@ -36,7 +39,7 @@ def run_case(name: str) -> list[dict]:
 
     path, sets = CASES[name]
     rows = run_local(load(ROOT / path, sets))
-    return [{k: v for k, v in row.items() if k not in UNSTABLE} for row in rows]
+    return [{k: v for k, v in row.items() if k not in UNSTABLE + NEWER} for row in rows]
 
 
 def platform_now() -> dict:

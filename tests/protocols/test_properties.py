@@ -120,7 +120,7 @@ def test_batch_size_is_only_a_speed_knob():
     """Candidates are one seeded stream; how many ACC evaluates per request changes no record."""
 
     def stable(rows):
-        return [{k: v for k, v in r.items() if k != "wall_ms"} for r in rows]
+        return [{k: v for k, v in r.items() if k not in ("wall_ms", "cpu_body_s", "cpu_controller_s")} for r in rows]
 
     one = run_local(load(SCENARIO, ["protocol.batch=1", "protocol.trials=80", "modules.vigilance.params.value=-0.1"]))
     many = run_local(

@@ -12,7 +12,7 @@ import pyarrow.parquet as pq
 
 from sfl_brain.messages import Learn
 from sfl_brain.modules.acc import ACC
-from sfl_brain.recording.records import read_records
+from sfl_brain.recording.records import NOT_REPRODUCIBLE, read_records
 from sfl_brain.recording.tables import (
     DECISION_COLUMNS,
     MAP_COLUMNS,
@@ -30,7 +30,7 @@ CAUTIOUS = ROOT / "docs" / "examples" / "cautious.yaml"
 
 
 def stable(rows):
-    return [{k: v for k, v in r.items() if k not in ("wall_ms", "worker")} for r in rows]
+    return [{k: v for k, v in r.items() if k not in NOT_REPRODUCIBLE} for r in rows]
 
 
 def test_tables_are_typed_and_hold_every_row(tmp_path):

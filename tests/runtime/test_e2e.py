@@ -19,7 +19,7 @@ from sfl_brain.scenario import load
 
 from ..conftest import ROOT, SCENARIOS, Lines, joined_run, sfl, sfl_run, start_sfl_run, wait_for_trials
 
-VOLATILE = {"wall_ms", "worker"}
+VOLATILE = {"wall_ms", "worker", "cpu_body_s", "cpu_controller_s"}
 
 
 def stable(rows):
@@ -78,7 +78,9 @@ def test_learn_run_records_everything_and_matches_in_process(tmp_path):
         "failures_before_first_success",
         "failures_before_10_gaits",
         "distinct_gaits",
+        "time_budget",  # where the wall time went (tests/recording/test_budget.py)
     }
+    assert inspected["time_budget"] == summary["time_budget"]
     assert inspected["trials"] == 60 and inspected["no_go"] == summary["no_go"]
     assert inspected["proposer"] == "sfl" and inspected["failures_before_first_success"] <= inspected["failures"]
     # sfl report draws the maps over the tried points and tabulates the run

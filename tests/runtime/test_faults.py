@@ -14,7 +14,7 @@ from sfl_brain.scenario import load
 
 from ..conftest import SCENARIOS, start_sfl_run, wait_for_trials
 
-VOLATILE = {"wall_ms", "worker"}
+VOLATILE = {"wall_ms", "worker", "cpu_body_s", "cpu_controller_s"}
 WALKER = SCENARIOS / "quickstart.yaml"
 
 

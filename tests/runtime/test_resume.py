@@ -23,7 +23,8 @@ STOP_AFTER = 15
 def rows_without_wall(run_dir: Path) -> list[dict]:
     rows = [json.loads(line) for line in (run_dir / "records.jsonl").read_text().splitlines()]
     for row in rows:
-        row.pop("wall_ms", None)
+        for clock in ("wall_ms", "cpu_body_s", "cpu_controller_s"):
+            row.pop(clock, None)
     return rows
 
 
@@ -42,7 +43,8 @@ def uninterrupted(sets: tuple[str, ...]) -> list[dict]:
     with tempfile.TemporaryDirectory() as tmp:
         rows = run_local(load(LEARN, list(sets)), Path(tmp))
     for row in rows:
-        row.pop("wall_ms", None)
+        for clock in ("wall_ms", "cpu_body_s", "cpu_controller_s"):
+            row.pop(clock, None)
     return rows
 
 

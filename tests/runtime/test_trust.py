@@ -18,7 +18,7 @@ from sfl_brain.scenario import load
 
 from ..conftest import SCENARIOS, TickStranger, listening_run
 
-VOLATILE = {"wall_ms", "worker"}
+VOLATILE = {"wall_ms", "worker", "cpu_body_s", "cpu_controller_s"}
 # a short walker run: 5 processes (body and controller apart), 300 ticks a trial
 WALKER = SCENARIOS / "quickstart.yaml"
 WALKER_SETS = ("protocol.trials=40", "modules.body.params.duration=3", "record.body_every=0")
