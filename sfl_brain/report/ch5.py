@@ -332,7 +332,7 @@ def _maps_figure(run: Run, out: Path) -> str:
         if not keep.any():
             continue
         order = np.argsort(columns["neuron"][keep].astype(int), kind="stable")
-        weights = np.array([columns["weights"][keep][i] for i in order], dtype=float)
+        weights = np.array(columns["weights"][keep][order].tolist(), dtype=float)
         reward = run.maps["success_reward"] if final else None
         colours = reward if reward is not None and np.isfinite(reward).any() else "tab:green"
         cmap = "viridis" if not isinstance(colours, str) else None

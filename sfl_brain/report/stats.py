@@ -120,8 +120,7 @@ def bootstrap_band(
         means = (draws @ np.where(has, a, 0.0)) / (draws @ has)  # (resamples, trials); nan: no seed drawn has one
     if not means.size:
         return mean, mean.copy(), mean.copy()
-    valid = np.isfinite(means)
-    means = np.where(valid, means, np.nan)
+    valid = np.isfinite(means)  # nan where no seed drawn has a value (0 / 0); never inf
     low, high = np.full(length, np.nan), np.full(length, np.nan)
     enough = (n > 1) & valid.any(axis=0)
     if enough.any():

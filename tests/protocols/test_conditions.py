@@ -168,7 +168,7 @@ def test_a_conditions_run_over_processes_records_tables_recording_and_report(tmp
     keep = ["trial", "condition", "repeat", "body.x", "body.y", "success", "quality", "survived"]
     second = pq.read_table(again / "trials.parquet").to_pylist()
     assert len(second) == len(table)
-    for first, other in zip(table, second):
+    for first, other in zip(table, second, strict=True):
         for key in keep:  # equal, NaN as NaN
             assert first[key] == other[key] or (first[key] != first[key] and other[key] != other[key]), key
 
