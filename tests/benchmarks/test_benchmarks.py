@@ -71,9 +71,12 @@ def test_planar_benchmark_prints_the_trial_ratios_beside_the_floors():
 
 
 def test_humanoid_benchmark_prints_the_trial_over_processes_against_one_process():
-    out = bench("humanoid.py", "--quick")
+    out = bench("humanoid.py", "--quick", "--seconds", "5")  # 16 s unless told: chapter 5's mean learning trial
     figures(out, r"\(b\)/\(c\) = ([\d.]+)")
     figures(out, r"\(c\)  CPG \+ body over processes +[\d.]+ ms  \( *([\d.]+)x real time")
+    figures(out, r"\(c\)  CPG \+ body over processes +[\d.]+ ms  \( *[\d.]+x real time; CPU +[\d.]+ ms, +([\d.]+)x\)")
+    figures(out, r"CPU over processes / one process: \(c\)/\(b\) = ([\d.]+)")
+    assert "one 5-s trial (500 control ticks, 2000 physics steps)" in out
 
 
 def test_engines_benchmark_prints_pybullet_against_mujoco():
