@@ -2,7 +2,7 @@
 adaptation's ``rate`` in ``humanoid_nao.yaml`` come from.
 
     python docs/calibration/humanoid_learnt.py RUNS CASE FROM [TO] [--starts 5] [--trial KEY=VALUE ...]
-                                               [--set KEY=VALUE ...]
+                                               [--set KEY=VALUE ...] [--point neuron|trial|wins]
 
 ``RUNS`` holds chapter 5's adaptive learn runs (``flat_adaptive_sN``, ``uphill_adaptive_sN``, ``downhill_adaptive_sN``,
 as ``docs/experiments/chapter5.sh`` names them); for each seed N found there, the walk uses that run's best neuron
@@ -29,6 +29,7 @@ from sfl_brain.bodies.humanoid import Humanoid  # noqa: E402
 from sfl_brain.body import InProcessLink  # noqa: E402
 from sfl_brain.messages import TrialRequest  # noqa: E402
 from sfl_brain.modules.controllers.cpg import CPGController, CPGParams  # noqa: E402
+from sfl_brain.scenario.plan import most_wins  # noqa: E402
 
 #: the chapter-5 setting of the controller (scenarios/e5_learn.yaml's conditions)
 CH5 = {"ankle_adaptation": "on", "start_ramp": 4.0}
@@ -45,9 +46,14 @@ CASES = {
 TERRAINS = ("flat", "uphill", "downhill")
 
 
-def best(runs: Path, terrain: str, seed: int) -> dict:
-    """The learn run's best neuron (protocol.best_of's choice), as controller trial parameters."""
-    point = json.loads((runs / f"{terrain}_adaptive_s{seed}" / "summary.json").read_text())["best"]["neuron_point"]
+def best(runs: Path, terrain: str, seed: int, point: str = "neuron") -> dict:
+    """The learn run's best neuron (protocol.best_of's choice with best_by reward, L1584; ``point`` "trial": the
+    highest-reward trial itself; "wins": best_by wins, the success neuron that won the most successes), as controller
+    trial parameters."""
+    folder = runs / f"{terrain}_adaptive_s{seed}"
+    if point == "wins":
+        return most_wins(folder)
+    point = json.loads((folder / "summary.json").read_text())["best"][f"{point}_point"]
     return {k: point[k] for k in ("gain_pitch", "gain_roll", "sigma_s")}
 
 
@@ -58,6 +64,9 @@ def main() -> None:
     parser.add_argument("start", choices=TERRAINS, metavar="FROM")
     parser.add_argument("to", nargs="?", choices=TERRAINS, metavar="TO")
     parser.add_argument("--starts", type=int, default=5)
+    parser.add_argument("--point", choices=["neuron", "trial", "wins"], default="neuron",
+                        help="the best neuron (best_by reward, L1584), the highest-reward trial itself, or the success "
+                        "neuron that won the most successes (best_by wins)")
     parser.add_argument("--trial", action="append", default=[], metavar="KEY=VALUE")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     args = parser.parse_args()
@@ -73,9 +82,9 @@ def main() -> None:
     total = 0
     print(f"{args.case}: {args.start}{' -> ' + args.to if args.to else ''}; trial {trial}; circuit {overrides or 'as shipped'}")
     for seed in seeds:
-        controller = dict(trial, **best(args.runs, args.start, seed))
+        controller = dict(trial, **best(args.runs, args.start, seed, args.point))
         if args.to:
-            nxt = best(args.runs, args.to, seed)
+            nxt = best(args.runs, args.to, seed, args.point)
             controller.update(terrain_switch="gradual", switch_detector="foot_slope", switch_band=1.5,
                               switch_when="outside", **{f"next_{k}": v for k, v in nxt.items()})
         ends = []

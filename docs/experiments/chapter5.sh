@@ -41,21 +41,29 @@ SHORT="--set protocol.trials=$TRIALS"
   done
 } | xargs -P "$JOBS" -I{} bash -c "{}"
 
-# the walks, with each seed's learnt neurons (two body workers: both cores)
+# the walks, with each seed's learnt neurons (two body workers: both cores), taken two ways (protocol.best_by):
+# the thesis's, the success neuron nearest the highest-reward trial (L1584: runs NAME_sN), and the success neuron that
+# won the most successful trials (runs NAME_wins_sN)
 for seed in 0 1 2; do
   FLAT="--set protocol.best_of.flat=$OUT/flat_adaptive_s$seed"
   UPHILL="--set protocol.best_of.uphill=$OUT/uphill_adaptive_s$seed"
   DOWNHILL="--set protocol.best_of.downhill=$OUT/downhill_adaptive_s$seed"
-  once "$OUT/switch_s$seed" sfl run scenarios/e5_switch.yaml --set seed=$seed $FLAT $UPHILL $DOWNHILL
-  once "$OUT/switch_flat_s$seed" sfl run scenarios/e5_switch_flat.yaml --set seed=$seed $FLAT $UPHILL
-  once "$OUT/uphill_runup_s$seed" sfl run scenarios/e5_uphill_runup.yaml --set seed=$seed $UPHILL
-  once "$OUT/detectors_s$seed" sfl run scenarios/e5_detectors.yaml --set seed=$seed $FLAT $UPHILL $DOWNHILL
+  for by in reward wins; do
+    TAG=$([ $by = wins ] && echo _wins || true)
+    BY="--set protocol.best_by=$by"
+    once "$OUT/switch${TAG}_s$seed" sfl run scenarios/e5_switch.yaml --set seed=$seed $BY $FLAT $UPHILL $DOWNHILL
+    once "$OUT/switch_flat${TAG}_s$seed" sfl run scenarios/e5_switch_flat.yaml --set seed=$seed $BY $FLAT $UPHILL
+    once "$OUT/uphill_runup${TAG}_s$seed" sfl run scenarios/e5_uphill_runup.yaml --set seed=$seed $BY $UPHILL
+    once "$OUT/detectors${TAG}_s$seed" sfl run scenarios/e5_detectors.yaml --set seed=$seed $BY $FLAT $UPHILL $DOWNHILL
+  done
 done
 for name in switch switch_flat uphill_runup detectors; do
   sfl report "$OUT/${name}"_s0 "$OUT/${name}"_s1 "$OUT/${name}"_s2 --out "$RESULTS"
+  sfl report "$OUT/${name}"_wins_s0 "$OUT/${name}"_wins_s1 "$OUT/${name}"_wins_s2 --out "$RESULTS/wins"
 done
 # the detectors compared on the same walks: McNemar's exact test against the thesis's torso band, Holm-adjusted
 python docs/experiments/e5_detectors_test.py "$OUT"
+python docs/experiments/e5_detectors_test.py "$OUT" detectors_wins
 
 # the pre-sweep that chose the learning ranges (its two body workers use both cores)
 once "$OUT/presweep" sfl run scenarios/e5_presweep.yaml

@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 from pydantic import BaseModel, ValidationError
 
 from .. import messages as m
@@ -176,10 +177,11 @@ def load(path: str | Path, overrides: list[str] = (), seed: int | None = None) -
 
 def learnt_values(raw: dict, base_dir: Path) -> tuple[dict, list[Problem]]:
     """A conditions protocol's references to learnt parameters, replaced by their values: a condition's value
-    ``"@NAME.AXIS"`` is the physical value on axis AXIS of the best parameters (summary.json ``best.neuron_point``: the
-    success neuron nearest the highest-reward trial, L1584) of the learn run ``protocol.best_of.NAME`` (a run folder,
-    from the current folder or the scenario's). Returns the scenario with the values in place (what the run folder's
-    scenario.yaml keeps) and the problems."""
+    ``"@NAME.AXIS"`` is the physical value on axis AXIS of the best parameters of the learn run
+    ``protocol.best_of.NAME`` (a run folder, from the current folder or the scenario's): with ``protocol.best_by``
+    ``reward`` (the default) summary.json's ``best.neuron_point``, the success neuron nearest the highest-reward trial
+    (L1584); with ``wins`` the success neuron that won the most successful trials (``acc.npz``). Returns the scenario
+    with the values in place (what the run folder's scenario.yaml keeps) and the problems."""
     protocol = raw.get("protocol") if isinstance(raw, dict) else None
     if not isinstance(protocol, dict) or protocol.get("kind") != "conditions":
         return raw, []
@@ -188,6 +190,9 @@ def learnt_values(raw: dict, base_dir: Path) -> tuple[dict, list[Problem]]:
     if not isinstance(conditions, dict) or not isinstance(runs, dict):
         return raw, []
     out, problems, found = copy.deepcopy(raw), [], {}
+    by = protocol.get("best_by", "reward")
+    if by not in BEST_BY:
+        return raw, []  # the schema says what is wrong with it
     for name, values in conditions.items():
         if not isinstance(values, dict):
             continue
@@ -206,7 +211,7 @@ def learnt_values(raw: dict, base_dir: Path) -> tuple[dict, list[Problem]]:
                 )
                 continue
             if run not in found:
-                found[run] = _best_of(runs[run], base_dir)
+                found[run] = _best_of(runs[run], base_dir, by)
                 if isinstance(found[run], str):  # why the folder gives no parameters: said once, at its first use
                     problems.append(Problem(f"protocol.best_of.{run}", found[run]))
             best = found[run]
@@ -225,8 +230,13 @@ def learnt_values(raw: dict, base_dir: Path) -> tuple[dict, list[Problem]]:
     return out, problems
 
 
-def _best_of(folder: str, base_dir: Path) -> dict | str:
-    """The physical best parameters (axis -> value) of the learn run in ``folder``, or why there are none."""
+#: protocol.best_by's choices (schema.ConditionsProtocol.best_by)
+BEST_BY = ("reward", "wins")
+
+
+def _best_of(folder: str, base_dir: Path, by: str = "reward") -> dict | str:
+    """The physical best parameters (axis -> value) of the learn run in ``folder`` (``by``: see ``learnt_values``), or
+    why there are none."""
     given = path = Path(str(folder))
     try:
         if not path.is_absolute() and not path.is_dir():
@@ -245,7 +255,28 @@ def _best_of(folder: str, base_dir: Path) -> dict | str:
     best = summary.get("best")
     if not isinstance(best, dict) or not isinstance(best.get("neuron_point"), dict):
         return f"expected best parameters in {path / 'summary.json'} (a learn run with a success); it has none"
+    if by == "wins":
+        return most_wins(path)
     return {k: v for k, v in best["neuron_point"].items() if k != "v_unit" and isinstance(v, int | float)}
+
+
+def most_wins(path: Path) -> dict | str:
+    """The physical parameters (axis -> value) of the success neuron of the learn run in ``path`` that won the most
+    successful trials (``acc.npz`` ``success_wins``; the higher learnt reward, then the lower index, breaks ties), on
+    the run's own space (its ``scenario.yaml``), or why there are none."""
+    try:
+        with np.load(path / "acc.npz") as data:
+            weights, wins = np.asarray(data["success_weights"], float), np.asarray(data["success_wins"])
+            reward = np.asarray(data["success_reward"], float)
+        space = yaml.safe_load((path / "scenario.yaml").read_text())["space"]
+        axes = [(str(a["name"]), float(a["low"]), float(a["high"])) for a in space]
+    except (OSError, ValueError, KeyError, TypeError, yaml.YAMLError) as exc:
+        return f"expected the success map (acc.npz) and the space (scenario.yaml) of a learn run in {path}: {exc}"
+    if weights.shape != (len(wins), len(axes)) or reward.shape != wins.shape or not (wins > 0).any():
+        return f"expected a success map with a neuron that won a success in {path / 'acc.npz'}"
+    order = np.lexsort((np.arange(len(wins)), -np.nan_to_num(reward, nan=-np.inf), -wins))
+    neuron = weights[int(order[0])]
+    return {name: low + float(u) * (high - low) for (name, low, high), u in zip(axes, neuron, strict=True)}
 
 
 def restart_policy(spec: ModuleSpec, cls: type[Module]) -> str:

@@ -210,7 +210,13 @@ class ConditionsProtocol(Strict):
         {},
         max_length=16,
         description="name -> a learn run's folder: a condition's value @NAME.AXIS is that run's best parameter on AXIS "
-        "(the success neuron nearest its highest-reward trial, L1584)",
+        "(which success neuron: best_by)",
+    )
+    best_by: Literal["reward", "wins"] = Field(
+        "reward",
+        description="the learn runs' neuron best_of takes: reward, the success neuron nearest the highest-reward "
+        "trial (L1584); wins, the success neuron that won the most successful trials (its learnt reward breaks ties: "
+        "issue 29, a highest-reward trial can be a lucky one in a region that mostly fails)",
     )
     follow: dict[str, str] = Field(
         {},

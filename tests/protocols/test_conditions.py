@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 
+import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
@@ -89,7 +90,7 @@ def test_cases_run_every_condition_point_and_repeat_and_pair_starts_by_repeat():
         ),
         (
             ("  repeats: 2", "  repeats: 2\n  repeatz: 3"),
-            "protocol.repeatz: unknown key; expected one of ['analyses', 'best_of', ",  # the conditions protocol's keys
+            "protocol.repeatz: unknown key; expected one of ['analyses', 'best_by', 'best_of', ",  # the conditions protocol's keys
         ),
     ],
 )
@@ -323,3 +324,37 @@ modules:
     (run / "summary.json").write_text(json.dumps({"status": "completed", "best": None}))
     done = sfl("check", str(write_scenario(text)))
     assert done.returncode == 2 and "expected best parameters in" in done.stderr
+
+
+def test_best_by_wins_takes_the_success_neuron_that_won_most_and_says_why_it_cannot(tmp_path, write_scenario):
+    run = tmp_path / "flat"
+    run.mkdir()
+    best = {"neuron": 0, "neuron_point": {"v_unit": [0.9, 0.9], "x": 0.9, "y": 1.8}}  # a lucky highest-reward trial
+    (run / "summary.json").write_text(json.dumps({"status": "completed", "best": best}))
+    (run / "scenario.yaml").write_text("space: [{name: x, low: 0.0, high: 1.0}, {name: y, low: 0.0, high: 2.0}]\n")
+    np.savez(
+        run / "acc.npz",
+        success_weights=np.array([[0.9, 0.9], [0.2, 0.4], [0.3, 0.1], [0.6, 0.6]]),
+        success_wins=np.array([1, 5, 5, 0]),  # two neurons won 5 successes each: the higher learnt reward wins
+        success_reward=np.array([9.0, 2.0, 3.0, 0.0]),
+    )
+    text = f"""
+name: learnt
+protocol:
+  kind: conditions
+  best_of: {{flat: {run}}}
+  best_by: wins
+  conditions:
+    best: {{body.x: "@flat.x", body.y: "@flat.y"}}
+modules:
+  body: {{impl: analytic}}
+"""
+    plan = sc.load(write_scenario(text))
+    assert plan.scenario.protocol.conditions["best"] == {"body.x": pytest.approx(0.3), "body.y": pytest.approx(0.2)}
+    thesis = sc.load(write_scenario(text.replace("  best_by: wins\n", "")))  # reward: L1584's neuron
+    assert thesis.scenario.protocol.conditions["best"] == {"body.x": 0.9, "body.y": 1.8}
+    done = sfl("check", str(write_scenario(text.replace("best_by: wins", "best_by: winz"))))
+    assert done.returncode == 2 and "protocol.best_by" in done.stderr and "wins" in done.stderr, done.stderr
+    (run / "acc.npz").unlink()
+    done = sfl("check", str(write_scenario(text)))
+    assert done.returncode == 2 and "protocol.best_of.flat: expected the success map (acc.npz)" in done.stderr
