@@ -32,11 +32,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _floor import machine_load  # noqa: E402
-from humanoid import REQUEST, SECONDS, STANDING_COMMAND, Standing  # noqa: E402
+from humanoid import REQUEST, STANDING_COMMAND, Standing  # noqa: E402
 
 from sfl_brain.bodies.humanoid import Humanoid  # noqa: E402
 from sfl_brain.body import InProcessLink  # noqa: E402
 from sfl_brain.modules.controllers.cpg import CPGController, CPGParams  # noqa: E402
+
+SECONDS = 10.0  # simulated time of a trial: the gait reaches the 1.5-m line at about 13.6 s, so every trial lasts it
 
 ENGINES = ("pybullet", "mujoco")
 ITEMS = {"a": "physics only, standing command", "a1": "body trial, constant controller", "b": "CPG + body"}
