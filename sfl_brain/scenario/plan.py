@@ -274,6 +274,8 @@ def most_wins(path: Path) -> dict | str:
         return f"expected the success map (acc.npz) and the space (scenario.yaml) of a learn run in {path}: {exc}"
     if weights.shape != (len(wins), len(axes)) or reward.shape != wins.shape or not (wins > 0).any():
         return f"expected a success map with a neuron that won a success in {path / 'acc.npz'}"
+    if not (np.isfinite(weights).all() and all(np.isfinite([low, high]).all() for _, low, high in axes)):
+        return f"expected finite weights and bounds in {path / 'acc.npz'} and {path / 'scenario.yaml'}"
     order = np.lexsort((np.arange(len(wins)), -np.nan_to_num(reward, nan=-np.inf), -wins))
     neuron = weights[int(order[0])]
     return {name: low + float(u) * (high - low) for (name, low, high), u in zip(axes, neuron, strict=True)}

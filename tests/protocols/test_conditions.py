@@ -355,6 +355,15 @@ modules:
     assert thesis.scenario.protocol.conditions["best"] == {"body.x": 0.9, "body.y": 1.8}
     done = sfl("check", str(write_scenario(text.replace("best_by: wins", "best_by: winz"))))
     assert done.returncode == 2 and "protocol.best_by" in done.stderr and "wins" in done.stderr, done.stderr
+    np.savez(
+        run / "acc.npz",
+        success_weights=np.array([[np.nan, 0.9], [0.2, 0.4]]),  # hostile: a weight that is not a number
+        success_wins=np.array([1, 5]),
+        success_reward=np.array([9.0, 2.0]),
+    )
+    done = sfl("check", str(write_scenario(text)))
+    assert done.returncode == 2 and "protocol.best_of.flat: expected finite weights and bounds" in done.stderr
+    assert "Traceback" not in done.stderr
     (run / "acc.npz").unlink()
     done = sfl("check", str(write_scenario(text)))
     assert done.returncode == 2 and "protocol.best_of.flat: expected the success map (acc.npz)" in done.stderr
