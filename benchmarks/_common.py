@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 import time
@@ -14,17 +13,6 @@ import numpy as np
 def stats(samples_s) -> str:
     a = np.asarray(samples_s) * 1e6
     return f"median {np.median(a):8.1f} us   p99 {np.percentile(a, 99):8.1f} us"
-
-
-def cpu_seconds(pids) -> float:
-    """The CPU seconds (user + system) the processes ``pids`` have used so far, to the kernel's clock tick (Linux:
-    ``/proc/<pid>/stat``'s utime and stime)."""
-    total = 0
-    for pid in pids:
-        with open(f"/proc/{pid}/stat", "rb") as f:
-            fields = f.read().rsplit(b")", 1)[1].split()  # after the command name, which may hold spaces
-        total += int(fields[11]) + int(fields[12])  # utime, stime: fields 14 and 15 of proc(5)
-    return total / os.sysconf("SC_CLK_TCK")
 
 
 def spawn_host(spec: dict) -> subprocess.Popen:

@@ -52,7 +52,10 @@ def best(runs: Path, terrain: str, seed: int, point: str = "neuron") -> dict:
     trial parameters."""
     folder = runs / f"{terrain}_adaptive_s{seed}"
     if point == "wins":
-        return most_wins(folder)
+        found = most_wins(folder)
+        if isinstance(found, str):  # why the run gives none
+            sys.exit(found)
+        return found
     point = json.loads((folder / "summary.json").read_text())["best"][f"{point}_point"]
     return {k: point[k] for k in ("gain_pitch", "gain_roll", "sigma_s")}
 

@@ -21,9 +21,9 @@ WALKS = [("switch", "up_switching"), ("switch", "down_switching"), ("uphill_runu
 
 
 def outcomes(folder: Path, condition: str) -> dict[int, bool]:
-    """Repeat index -> success, for the condition's trials of one run (in trial order)."""
-    rows = [r for r in pq.read_table(folder / "trials.parquet").to_pylist() if r["condition"] == condition]
-    return {k: bool(r["success"]) for k, r in enumerate(rows)}
+    """Repeat -> success, for the condition's trials of one run (its trials table's ``repeat``: the start)."""
+    rows = pq.read_table(folder / "trials.parquet", columns=["condition", "repeat", "success"]).to_pylist()
+    return {r["repeat"]: bool(r["success"]) for r in rows if r["condition"] == condition}
 
 
 def main() -> None:

@@ -47,6 +47,7 @@ from .loading import (
     read_yaml,
 )
 from .schema import (
+    Axis,
     ModuleSpec,
     ScenarioModel,
     conditions_problems,
@@ -268,17 +269,16 @@ def most_wins(path: Path) -> dict | str:
         with np.load(path / "acc.npz") as data:
             weights, wins = np.asarray(data["success_weights"], float), np.asarray(data["success_wins"])
             reward = np.asarray(data["success_reward"], float)
-        space = yaml.safe_load((path / "scenario.yaml").read_text())["space"]
-        axes = [(str(a["name"]), float(a["low"]), float(a["high"])) for a in space]
-    except (OSError, ValueError, KeyError, TypeError, yaml.YAMLError) as exc:
+        axes = [Axis.model_validate(a) for a in yaml.safe_load((path / "scenario.yaml").read_text())["space"]]
+    except (OSError, ValueError, KeyError, TypeError, yaml.YAMLError) as exc:  # ValidationError is a ValueError
         return f"expected the success map (acc.npz) and the space (scenario.yaml) of a learn run in {path}: {exc}"
     if weights.shape != (len(wins), len(axes)) or reward.shape != wins.shape or not (wins > 0).any():
         return f"expected a success map with a neuron that won a success in {path / 'acc.npz'}"
-    if not (np.isfinite(weights).all() and all(np.isfinite([low, high]).all() for _, low, high in axes)):
-        return f"expected finite weights and bounds in {path / 'acc.npz'} and {path / 'scenario.yaml'}"
     order = np.lexsort((np.arange(len(wins)), -np.nan_to_num(reward, nan=-np.inf), -wins))
-    neuron = weights[int(order[0])]
-    return {name: low + float(u) * (high - low) for (name, low, high), u in zip(axes, neuron, strict=True)}
+    values = {a.name: a.to_physical(float(u)) for a, u in zip(axes, weights[int(order[0])], strict=True)}
+    if not (np.isfinite(weights).all() and np.isfinite(list(values.values())).all()):
+        return f"expected finite weights and bounds in {path / 'acc.npz'} and {path / 'scenario.yaml'}"
+    return values
 
 
 def restart_policy(spec: ModuleSpec, cls: type[Module]) -> str:

@@ -331,7 +331,9 @@ def test_best_by_wins_takes_the_success_neuron_that_won_most_and_says_why_it_can
     run.mkdir()
     best = {"neuron": 0, "neuron_point": {"v_unit": [0.9, 0.9], "x": 0.9, "y": 1.8}}  # a lucky highest-reward trial
     (run / "summary.json").write_text(json.dumps({"status": "completed", "best": best}))
-    (run / "scenario.yaml").write_text("space: [{name: x, low: 0.0, high: 1.0}, {name: y, low: 0.0, high: 2.0}]\n")
+    (run / "scenario.yaml").write_text(
+        "space: [{name: x, target: body.x, low: 0.0, high: 1.0}, {name: y, target: body.y, low: 0.0, high: 2.0}]\n"
+    )
     np.savez(
         run / "acc.npz",
         success_weights=np.array([[0.9, 0.9], [0.2, 0.4], [0.3, 0.1], [0.6, 0.6]]),
