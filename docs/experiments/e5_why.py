@@ -1,0 +1,123 @@
+"""Why two of issue 29's cases still differ from the thesis, read from chapter 5's runs (no new walk):
+
+1. **The convex edges** (flat -> down, up -> flat): per walk of ``detectors{TAG}_s0..2``, the time after a foot first
+   touched the next piece of ground (the body's ``events/terrain``) until a foot's sensed slope came within 3 deg of
+   the new piece's slope (``controller/terrain/slope_l``, ``_r``), the feet detector and the torso band fired
+   (``controller/events/detector``), and the torso pitched past 10 deg (``body/torso/pitch``), medians per case; and
+   how many walks' feet detector fired before the estimate reached the new slope and before the torso passed 10 deg.
+2. **Downhill -> flat without switching**: per seed and neuron choice, the learnt downhill neuron (``switch{TAG}_sN``'s
+   ``down_without`` trials), its walks onto the flat, and the share of its 8 nearest cells of the flat pre-sweep
+   (``presweep``, in the space's unit cube) that walked the flat.
+
+    python docs/experiments/e5_why.py runs/chapter5
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+
+from sfl_brain.recording.recorded import read_events, read_series
+
+SLOPES = {"flatdown": (0.0, -10.0), "upflat": (10.0, 0.0), "up": (0.0, 10.0), "down": (-10.0, 0.0)}
+NEAR_DEG = 3.0  # a foot senses the new slope: its estimate within this of the new piece's slope
+TORSO_DEG = 10.0
+
+
+def table(path: Path) -> list[dict]:
+    return pq.read_table(path).to_pylist()
+
+
+def median(values) -> float:
+    return float(np.median(values)) if len(values) else float("nan")
+
+
+def edge_times(runs: Path, tag: str) -> list[dict]:
+    rows = []
+    for seed in range(3):
+        run = runs / f"detectors{tag}_s{seed}"
+        trials = table(run / "trials.parquet")
+        rrd = run / "recording.rrd"
+        feet = ["controller/terrain/slope_l", "controller/terrain/slope_r"]
+        series = read_series(rrd, [*feet, "body/torso/pitch"])
+        events = read_events(rrd, ["body/events/terrain", "controller/events/detector"])
+        for trial, case in ((t["trial"], t["condition"]) for t in trials):
+            touched = events["body/events/terrain"].get(int(trial))
+            if case not in SLOPES or touched is None:
+                continue
+            t0 = touched.times[0]
+            new = float(re.search(r"\(([-\d.]+) deg", touched.texts[0]).group(1))
+            fired = {}
+            if int(trial) in events["controller/events/detector"]:
+                e = events["controller/events/detector"][int(trial)]
+                for when, text in zip(e.times, e.texts, strict=True):
+                    fired.setdefault(text.split(":")[0].removeprefix("detector "), when - t0)
+            on_new = np.inf
+            for name in feet:
+                s = series[name][int(trial)]
+                close = (s.times >= t0) & (np.abs(s.values - new) < NEAR_DEG)
+                if close.any():
+                    on_new = min(on_new, s.times[close][0] - t0)
+            pitch = series["body/torso/pitch"][int(trial)]
+            tilted = (pitch.times >= t0) & (np.abs(pitch.values) > TORSO_DEG)
+            rows.append({
+                "seed": seed, "case": case, "foot_on_new_slope": on_new,
+                "feet": fired.get("foot_slope", np.nan), "torso_band": fired.get("torso", np.nan),
+                "torso_past_10deg": pitch.times[tilted][0] - t0 if tilted.any() else np.inf,
+            })  # fmt: skip
+    return rows
+
+
+def downhill_without(runs: Path, tag: str) -> list[str]:
+    sweep = table(runs / "presweep" / "trials.parquet")
+    axes = ["gain_pitch", "gain_roll", "sigma_s"]
+    cells = np.array([[row[a] for a in axes] for row in sweep])
+    walked = np.array([bool(row["success"]) for row in sweep])
+    low, high = cells.min(axis=0), cells.max(axis=0)
+    lines = []
+    for seed in range(3):
+        walks = [t for t in table(runs / f"switch{tag}_s{seed}" / "trials.parquet") if t["condition"] == "down_without"]
+        neuron = np.array([walks[0][f"controller.{a}"] for a in axes])
+        nearest = np.argsort(np.linalg.norm((cells - neuron) / (high - low), axis=1))[:8]
+        on = sum(bool(t["success"]) for t in walks)
+        lines.append(f"seed {seed}: neuron {np.round(neuron, 2).tolist()} walks on {on}/{len(walks)}; "
+                     f"its 8 nearest pre-sweep cells walk the flat {int(walked[nearest].sum())}/8")  # fmt: skip
+    return lines
+
+
+def main(argv: list[str]) -> int:
+    if len(argv) != 1 or not Path(argv[0]).is_dir():
+        print("usage: python docs/experiments/e5_why.py RUNS (chapter5.sh's run folder)", file=sys.stderr)
+        return 2
+    runs = Path(argv[0])
+    for tag, name in (("", "the thesis's neuron"), ("_wins", "the most-winning neuron")):
+        print(f"## {name} (detectors{tag}_s0..2, switch{tag}_s0..2)\n")
+        times = edge_times(runs, tag)
+        keys = ["foot_on_new_slope", "feet", "torso_band", "torso_past_10deg"]
+        print("s after a foot first touched the next piece, medians over the walks (a detector that never fired, or")
+        print("fired before the touch, left out; inf: never within the walk)")
+        print("| case | " + " | ".join(keys) + " |")
+        for case in SLOPES:
+            mine = [r for r in times if r["case"] == case]
+            cells = [median([r[k] for r in mine if np.isfinite(r[k]) and r[k] > 0] or [np.inf]) for k in keys]
+            print(f"| {case} | " + " | ".join(f"{c:.2f}" for c in cells) + " |")
+        for case in ("flatdown", "upflat"):
+            mine = [r for r in times if r["case"] == case]
+            fired = [r for r in mine if np.isfinite(r["feet"]) and r["feet"] > 0]
+            print(
+                f"{case}: {len(mine)} walks; the feet fired after the touch in {len(fired)}, before a foot sensed "
+                f"the new slope in {sum(r['feet'] < r['foot_on_new_slope'] for r in fired)}, before the torso passed "
+                f"{TORSO_DEG:g} deg in {sum(r['feet'] < r['torso_past_10deg'] for r in fired)} (median "
+                f"{median([r['torso_past_10deg'] - r['feet'] for r in fired]):.2f} s before)"
+            )
+        print("\ndownhill -> flat without switching:")
+        print("\n".join(downhill_without(runs, tag)), "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
