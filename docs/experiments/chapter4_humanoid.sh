@@ -24,12 +24,14 @@ for name in humanoid_gait e4_5_poincare e4_7_push e4_7_ball; do
   sfl report "$OUT/$name" --out "$RESULTS"
 done
 for name in e4_7_push_43kg e4_6_uphill humanoid_margin; do  # seeds 0, 1, 2 (the margin also 3), pooled on one page
-  seeds="0 1 2"
-  [ "$name" = humanoid_margin ] && seeds="0 1 2 3"  # issue 29: >= 10 phases x >= 4 seeds
-  for seed in $seeds; do
+  seeds=(0 1 2)
+  if [ "$name" = humanoid_margin ]; then seeds=(0 1 2 3); fi  # issue 29: >= 10 phases x >= 4 seeds
+  runs=()
+  for seed in "${seeds[@]}"; do
     once "$OUT/${name}_s$seed" sfl run "scenarios/$name.yaml" --set seed=$seed
+    runs+=("$OUT/${name}_s$seed")
   done
-  sfl report $(for seed in $seeds; do echo "$OUT/${name}_s$seed"; done) --out "$RESULTS"
+  sfl report "${runs[@]}" --out "$RESULTS"
 done
 # E4.6's best cell of seeds 0-2 (alpha_MLR 0.6, theta_MLR -0.15 at 3b765a1: 8/9 adapted), walked again on seeds 3-5 so
 # that its count is not the luck of choosing the best of 20 cells
