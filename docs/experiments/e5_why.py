@@ -14,7 +14,6 @@
 
 from __future__ import annotations
 
-import re
 import sys
 from pathlib import Path
 
@@ -22,8 +21,10 @@ import numpy as np
 import pyarrow.parquet as pq
 
 from sfl_brain.recording.recorded import read_events, read_series
+from sfl_brain.report.terrain import detector_of
 
-SLOPES = {"flatdown": (0.0, -10.0), "upflat": (10.0, 0.0), "up": (0.0, 10.0), "down": (-10.0, 0.0)}
+#: each walk's case (e5_detectors.yaml) and the slope of the ground it walks onto, deg
+NEW_SLOPE = {"flatdown": -10.0, "upflat": 0.0, "up": 10.0, "down": 0.0}
 NEAR_DEG = 3.0  # a foot senses the new slope: its estimate within this of the new piece's slope
 TORSO_DEG = 10.0
 
@@ -47,15 +48,14 @@ def edge_times(runs: Path, tag: str) -> list[dict]:
         events = read_events(rrd, ["body/events/terrain", "controller/events/detector"])
         for trial, case in ((t["trial"], t["condition"]) for t in trials):
             touched = events["body/events/terrain"].get(int(trial))
-            if case not in SLOPES or touched is None:
+            if case not in NEW_SLOPE or touched is None:
                 continue
-            t0 = touched.times[0]
-            new = float(re.search(r"\(([-\d.]+) deg", touched.texts[0]).group(1))
+            t0, new = touched.times[0], NEW_SLOPE[case]
             fired = {}
             if int(trial) in events["controller/events/detector"]:
                 e = events["controller/events/detector"][int(trial)]
                 for when, text in zip(e.times, e.texts, strict=True):
-                    fired.setdefault(text.split(":")[0].removeprefix("detector "), when - t0)
+                    fired.setdefault(detector_of(text), when - t0)
             on_new = np.inf
             for name in feet:
                 s = series[name][int(trial)]
@@ -101,7 +101,7 @@ def main(argv: list[str]) -> int:
         print("s after a foot first touched the next piece, medians over the walks (a detector that never fired, or")
         print("fired before the touch, left out; inf: never within the walk)")
         print("| case | " + " | ".join(keys) + " |")
-        for case in SLOPES:
+        for case in NEW_SLOPE:
             mine = [r for r in times if r["case"] == case]
             cells = [median([r[k] for r in mine if np.isfinite(r[k]) and r[k] > 0] or [np.inf]) for k in keys]
             print(f"| {case} | " + " | ".join(f"{c:.2f}" for c in cells) + " |")

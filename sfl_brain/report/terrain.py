@@ -59,6 +59,11 @@ def _first_below(series, after: float, level: float) -> float | None:
     return float(series.times[np.argmax(mine)]) if mine.any() else None
 
 
+def detector_of(text: str) -> str:
+    """The detector a controller's ``events/detector`` line names (``detector NAME: ...``, ``detector_text``)."""
+    return text.split(":")[0].removeprefix("detector ")
+
+
 def detection_rows(t: Trials, run_dirs: list[Path], analysis: dict) -> list[dict]:
     """One row per logged trial and watched detector: condition, detector, fired (s of the trial or None), reached
     (when a foot met the next ground, or None), pitch (when the torso pitch first fell below ``pitch_below`` after the
@@ -67,8 +72,7 @@ def detection_rows(t: Trials, run_dirs: list[Path], analysis: dict) -> list[dict
     events = [f"{module}/events/detector", "body/events/terrain"]
     out = []
     for _run, rows, series, marks, starts in _logged(t, run_dirs, ["body/torso/pitch"], events):
-        watched = sorted({text.split(":")[0].removeprefix("detector ") for e in marks[events[0]].values()
-                          for text in e.texts})  # fmt: skip
+        watched = sorted({detector_of(text) for e in marks[events[0]].values() for text in e.texts})
         for trial, row in rows.items():
             if trial not in starts:
                 continue  # not logged
@@ -83,7 +87,7 @@ def detection_rows(t: Trials, run_dirs: list[Path], analysis: dict) -> list[dict
             fired: dict[str, float] = {}
             found = marks[events[0]].get(trial)
             for when, text in zip(found.times, found.texts, strict=True) if found is not None else ():
-                fired.setdefault(text.split(":")[0].removeprefix("detector "), float(when - start))
+                fired.setdefault(detector_of(text), float(when - start))
             for detector in watched:
                 out.append(
                     {
