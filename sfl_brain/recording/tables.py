@@ -155,15 +155,19 @@ def _table(rows: list[dict], schema: pa.Schema) -> pa.Table:
     return pa.table(columns, schema=schema)
 
 
-def write_tables(run_dir: Path, axes: list[dict], metric_units: dict[str, str] | None = None) -> list[Path]:
+def write_tables(
+    run_dir: Path, axes: list[dict], metric_units: dict[str, str] | None = None, rows: list[dict] | None = None
+) -> list[Path]:
     """Write ``decisions.parquet`` and ``trials.parquet`` from the run's records, and ``maps.parquet``
     from the module processes' parts; returns the paths.
 
     ``axes``: the scenario's ``space`` entries (name, target, unit); ``metric_units``: the body's metric units
-    (``Body.METRICS``) for the ``m_<metric>`` columns. A kind with no row gets no file.
+    (``Body.METRICS``) for the ``m_<metric>`` columns; ``rows``: the records already read (read here if None). A kind
+    with no row gets no file.
     """
     run_dir = Path(run_dir)
-    rows = read_records(run_dir)
+    if rows is None:
+        rows = read_records(run_dir)
     written = []
     for kind, base in (("decision", DECISION_COLUMNS), ("trial", TRIAL_COLUMNS)):
         of_kind = [r for r in rows if r.get("kind") == kind]

@@ -387,9 +387,10 @@ def run(
             ended = _conduct(plan, sup, events, run_dir, resume, on_ready, started, budget)
         finally:
             stopping.cleaning = True
-            cleanup = _close(plan, run_dir, sup, writer, rr_log, ended, stopping, budget)
-    with budget.part("records"):
-        rows = read_records(run_dir)
+            cleanup, rows = _close(plan, run_dir, sup, writer, rr_log, ended, stopping, budget)
+    if rows is None:  # the tables' step failed before it read them
+        with budget.part("records"):
+            rows = read_records(run_dir)
     _judge_run(ended, rows, cleanup, stopping)
     wall = time.perf_counter() - started
     if resume is not None:  # the time it had taken before, and where it went on from
@@ -541,17 +542,24 @@ def _close(
     ended: _Ended,
     stopping: _Stopping,
     budget: TimeBudget,
-) -> list[str]:
+) -> tuple[list[str], list[dict] | None]:
     """Stop the modules, close the records and the Rerun log, merge the recording and write the tables; what went
-    wrong doing so, one line each. Every step runs whatever the others did: a full disk must not cost the summary."""
+    wrong doing so, one line each, and the records as the tables read them (None if that step failed before).
+    Every step runs whatever the others did: a full disk must not cost the summary."""
     cleanup = []
+    read: list[list[dict]] = []  # the records once, for the tables and the summary (a long run's are large)
+
+    def tables() -> None:
+        read.append(read_records(run_dir))
+        write_tables(run_dir, plan.raw.get("space", []), plan.body_class.METRICS, rows=read[0])
+
     for part, step in (
         ("shutdown", lambda: sup.stop(grace=0.0 if stopping.signals > 1 else 3.0)),
         ("records", writer.close),
         # a full disk: rerun's writer has stopped, do not wait the healthy disk's time for it
         ("records", lambda: rr_log.close(timeout=2.0 if ended.exit_code == EXIT_ENVIRONMENT else RERUN_FLUSH_TIMEOUT)),
         ("records", lambda: merge_recordings(run_dir)),
-        ("records", lambda: write_tables(run_dir, plan.raw.get("space", []), plan.body_class.METRICS)),
+        ("records", tables),
     ):
         try:
             with budget.part(part):
@@ -559,7 +567,7 @@ def _close(
         except Exception as exc:  # noqa: BLE001 - reported in the summary, never raised
             cleanup.append(f"{type(exc).__name__}: {exc}")
             _log_internal(run_dir)
-    return cleanup
+    return cleanup, (read[0] if read else None)
 
 
 def _judge_run(ended: _Ended, rows: list[dict], cleanup: list[str], stopping: _Stopping) -> None:

@@ -88,9 +88,9 @@ def test_cases_run_every_condition_point_and_repeat_and_pair_starts_by_repeat():
             ),
             "protocol.analyses.0: pattern_space reads the controller's RG potentials: expected record.neurons: true",
         ),
-        (
+        (  # the conditions protocol's keys
             ("  repeats: 2", "  repeats: 2\n  repeatz: 3"),
-            "protocol.repeatz: unknown key; expected one of ['analyses', 'best_by', 'best_of', ",  # the conditions protocol's keys
+            "protocol.repeatz: unknown key; expected one of ['analyses', 'best_by', 'best_of', ",
         ),
     ],
 )
