@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from sfl_brain.recording.records import RecordWriter, plain, read_records, row_json
 
-SETTINGS = settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+SETTINGS = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 floats = st.floats()  # NaN and the infinities included
 numpy_scalars = st.one_of(
