@@ -32,12 +32,13 @@ from sfl_brain.report.study import (  # noqa: E402
     Claim,
     RunMetrics,
     StudySettings,
-    _curves_figure,
-    _eta_figure,
-    _failures_figure,
+    _figure_file,
     bounded_cell,
     censored_cell,
     claims_table,
+    curves_figure,
+    eta_figure,
+    failures_figure,
     tradeoff_figure,
 )
 
@@ -399,9 +400,9 @@ def main() -> None:
         out = args.figures / walker
         out.mkdir(exist_ok=True)
         shown = {label: [run_metrics_of(r) for r in rs] for label, rs in groups.items()}
-        _curves_figure(shown, settings, out)
-        _eta_figure(shown, out)
-        _failures_figure(shown, settings, out)
+        _figure_file(lambda shown=shown: curves_figure(shown, settings), out, "study_learning.png")
+        _figure_file(lambda shown=shown: eta_figure(shown), out, "study_best_eta.png")
+        _figure_file(lambda shown=shown: failures_figure(shown, settings), out, "study_failures_before_k.png")
     tradeoff_figure({WALKERS[w]["title"].split(",")[0]: p for w, p in panels.items()}, args.figures / "tradeoff.png")
     claim_lines, adjusted = claims_table(all_claims, ALPHA)
     explore_groups = {

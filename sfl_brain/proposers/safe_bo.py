@@ -79,10 +79,11 @@ class SafeBO(Optimiser):
             return np.arange(len(draws))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # scikit-learn's convergence notes on small data
-            # the classifier needs both outcomes: with successes only, every draw is as likely to succeed
-            p_success = self._p_success(draws) if not all(self.successes) else np.ones(len(draws))
+            # the classifier needs both outcomes: with successes only, every draw is as likely to succeed; with
+            # failures only (a gated run's vetoes are told as failures), the draws least like a failure first
             if not any(self.successes):
-                return np.argsort(-p_success, kind="stable")
+                return np.argsort(self._failure_likeness(draws), kind="stable")
+            p_success = self._p_success(draws) if not all(self.successes) else np.ones(len(draws))
             score = self._expected_improvement(draws) * p_success
         safe = p_success >= self.params.min_success_probability
         by_p = np.argsort(-p_success, kind="stable")
@@ -99,6 +100,14 @@ class SafeBO(Optimiser):
         model = GaussianProcessClassifier(kernel=kernel, optimizer=None)
         model.fit(np.asarray(self.points), np.asarray(self.successes))
         return model.predict_proba(draws)[:, list(model.classes_).index(True)]
+
+    def _failure_likeness(self, draws: np.ndarray) -> np.ndarray:
+        """Each draw's largest kernel correlation with a failure (the classifier's Matérn): with failures only, the
+        classifier cannot be fitted (one class), and a Gaussian-process model of success falls the most near a
+        failure, so this orders the draws as its P(s | x) would, most likely success first when sorted up."""
+        from sklearn.gaussian_process.kernels import Matern
+
+        return Matern(self.params.length_scale, "fixed", nu=2.5)(draws, np.asarray(self.points)).max(axis=1)
 
     def _expected_improvement(self, draws: np.ndarray) -> np.ndarray:
         from sklearn.gaussian_process import GaussianProcessRegressor

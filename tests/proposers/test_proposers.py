@@ -93,6 +93,19 @@ def test_a_model_based_proposer_learns_the_landscape(kind):
     assert np.mean(late) > 0.5, np.mean(late)
 
 
+def test_safe_bo_with_failures_only_asks_away_from_them():
+    """Every trial failed (a gated run told its vetoes as failures; baselines' gated safe_bo, planar seed 2, stopped
+    with scikit-learn's "requires 2 or more distinct classes"): the next point is the draw least like a failure."""
+    proposer = make("safe_bo", n_startup_trials=3)
+    failed = [np.array([0.1, 0.1]), np.array([0.2, 0.15]), np.array([0.15, 0.3]), np.array([0.3, 0.2])]
+    for v in failed:
+        proposer.tell(v, Outcome(False, None))
+    v = proposer.ask(OpenGate())
+    assert min(np.linalg.norm(v - f) for f in failed) > 0.9, v  # the far corner of the unit square
+    proposer.tell(v, Outcome(True, 0.5))  # then the classifier has both outcomes and the models take over
+    assert proposer.ask(OpenGate()).shape == (2,)
+
+
 def test_cma_es_starts_again_when_it_stops():
     proposer = make("cma", popsize=4, sigma0=0.05)
     for _ in range(400):
