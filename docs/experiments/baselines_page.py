@@ -491,9 +491,52 @@ def summary(sections: dict, by_key: dict[str, Claim], adjusted: dict[str, float]
     return lines
 
 
+def explore_against_plain(explored: dict[str, list[Run]], final: dict[str, list[Run]]) -> str:
+    """Each explored group's best eta over its plain optimiser's run of the same seed, where that seed ran plain."""
+    parts = []
+    for label, runs in explored.items():
+        plain = final.get(runs[0].kind, [])
+        mine, theirs = paired(runs, plain, best_eta)
+        if mine:
+            ratios = ", ".join(f"{a / b:.2f}" for a, b in zip(mine, theirs, strict=True) if b > 0)
+            parts.append(f"{label} {ratios}")
+    if not parts:
+        return ""
+    return "Best eta over the plain optimiser's run of the same seed: " + "; ".join(parts) + "."
+
+
+def made_at(runs: list[Run]) -> str:
+    """Which code made the runs, from each run's ``provenance.json`` (a ``+`` marks uncommitted changes)."""
+    commits: dict[str, int] = {}
+    for r in runs:
+        try:
+            made = json.loads((r.path / "provenance.json").read_text())
+            commit = (made.get("commit") or "unknown")[:7] + ("+" if made.get("uncommitted_changes") else "")
+        except (OSError, ValueError, AttributeError):
+            commit = "unknown"
+        commits[commit] = commits.get(commit, 0) + 1
+    return (
+        "Made at code commit "
+        + ", ".join(f"`{c}` ({n} run{'s' if n != 1 else ''})" for c, n in sorted(commits.items(), key=lambda c: -c[1]))
+        + "."
+    )
+
+
 def page(sections, explore_groups, targets, claim_lines, goal_lines, said, left_out, args) -> str:
     rel = args.figures.relative_to(args.page.parent)
     text = [HEADER]
+    missing = [w for w in WALKERS if w not in sections]
+    if missing:
+        text += [
+            "**Not on this page yet:** "
+            + "; ".join(
+                f"{WALKERS[w]['title']}: no completed run under `{w}/` "
+                f"(`BODIES={w} bash docs/experiments/baselines.sh`)"
+                for w in missing
+            )
+            + ". The claims and their Holm adjustment cover the walkers shown only.",
+            "",
+        ]
     for walker, groups in sections.items():
         text += [
             f"## {WALKERS[walker]['title']}",
@@ -502,6 +545,8 @@ def page(sections, explore_groups, targets, claim_lines, goal_lines, said, left_
             "",
             f"The target eta is {targets[walker]:.3g}: the lower quartile of the plain optimisers' best etas on this "
             "walker (three quarters of their runs reach it). Seeds per group: " + seeds_of(groups) + ".",
+            "",
+            made_at([r for rs in groups.values() for r in rs]),
             "",
             *groups_table(groups, targets[walker]),
             "",
@@ -538,6 +583,8 @@ def page(sections, explore_groups, targets, claim_lines, goal_lines, said, left_
                 "",
                 "Seeds: " + seeds_of(groups) + ".",
                 "",
+                explore_against_plain(groups, sections[walker]),
+                "",
             ]
     if left_out:
         text += ["Left out of every number (did not complete):", ""]
@@ -558,8 +605,8 @@ page asks whether the same early warning, put in front of those optimisers (`pro
 
 Made by `bash docs/experiments/baselines.sh`: one `sfl study` per group set on each walker, then
 `docs/experiments/baselines_page.py` writes this page, its figures and `baselines/numbers.json` (every run's
-metrics, every claim's test) from the run folders. On the 2-core VM, one run at a time, the machine shared with two
-other engineers' experiments (load 10-17): wall times are not comparable and are not shown.
+metrics, every claim's test) from the run folders. Each walker's section says which code made its runs and how many
+ran at once; wall times depend on the machine and on what ran beside them, and are not shown.
 
 **Groups.** `sfl` at a sweep of fixed vigilance (and, on the humanoid, adaptive vigilance from -0.15, §5.6.3);
 CMA-ES, TPE and the safe optimiser (`safe_bo`) each plain (`gate: off`) and gated. A gated group runs at the walker's
@@ -603,15 +650,14 @@ step-down adjustment runs over every claim of the page; a claim **holds** when i
 does not is *not shown*, and the text does not make it."""
 EXPLORE_TEXT = """Each was run on two seeds before the final groups were chosen: veto or resample on seeds 0 and 1,
 which are also seeds of the final groups (their runs are the same, so the choice saw two of the five seeds), the
-first restarts on seeds 10 and 11. Gated CMA-ES with `veto` told every vetoed point to the strategy as a failure:
-its mean moved away from the no-go region and with it from the most efficient gaits, which on the planar walker lie
-close to failures (in a plain CMA-ES run the best gaits were no-go decisions at s_vig 0, d_f - d_s -0.06 to -0.004);
-its best eta fell to 0.73-0.84x. With `resample` the strategy is told nothing of the gate, keeps its own path and
-reaches the plain optimiser's best eta. TPE with `resample` redraws from a model that learnt nothing of the refusal:
-on the analytic body and in the unit tests its every redraw fell in the same no-go corner until the budget was spent
-(`tests/proposers/test_gate.py`), and it was not run on the walkers; with `veto` the refused corner enters TPE's worse
-group. Restarts of CMA-ES (`restart_below` 0.05, `restart_from: novel`) restarted once per run at that threshold, late
-(trial 149 in seed 10), and found one or two more gaits; the final group restarts when the step size falls below the
+first restarts on seeds 10 and 11. Gated CMA-ES with `veto` tells every vetoed point to the strategy as a failure:
+its mean moves away from the no-go region, and on the planar walker the most efficient gaits lie close to failures
+(a plain CMA-ES run tries about half its points where the gate says no-go, table above), so it loses best eta (the
+ratios below the table). With `resample` the strategy is told nothing of the gate and keeps its own path. TPE with
+`resample` redraws from a model that learnt nothing of the refusal: on the analytic body and in the unit tests its
+every redraw fell in the same no-go corner until the budget was spent (`tests/proposers/test_gate.py`), and it was
+not run on the walkers; with `veto` the refused corner enters TPE's worse group. Restarts of CMA-ES from novel
+gate-approved draws were tried at `restart_below` 0.05; the final group restarts when the step size falls below the
 gaits' distinctness (0.1)."""
 DISCUSSION = """"""
 

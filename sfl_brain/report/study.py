@@ -28,6 +28,7 @@ the table with its status and why.
 from __future__ import annotations
 
 import json
+import textwrap
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -193,7 +194,17 @@ BAND_TITLE = f"band: 95 % bootstrap interval, dashed edges (at {FEW} seeds or fe
 
 
 def _colours(n: int) -> list:
-    return [plt.get_cmap("tab10")(i % 10) for i in range(n)]
+    """A colour per group: tab10's; past 10 groups, tab20's dark ten and then its light ten (no two alike)."""
+    if n <= 10:
+        return [plt.get_cmap("tab10")(i) for i in range(n)]
+    tab20 = plt.get_cmap("tab20")
+    return [tab20((2 * i) % 20 + (2 * i) // 20) for i in range(n)]
+
+
+def _legend_columns(labels: list[str]) -> int:
+    """Legend columns that fit the page's width: three short labels a row, two longer ones, one long one."""
+    longest = max((len(label) for label in labels), default=0)
+    return min(len(labels), 3 if longest <= 32 else 2 if longest <= 50 else 1) or 1
 
 
 def _mean_and_band(ax, curves: list, colour, label: str) -> None:
@@ -222,9 +233,13 @@ def curves_figure(groups: dict[str, list[RunMetrics]], settings: StudySettings) 
     fail_ax.set_ylabel("cumulative failures (trials)")
     fail_ax.set_ylim(bottom=0)
     handles, labels = rate_ax.get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=min(3, len(labels)), frameon=False)
+    ncol = _legend_columns(labels)
+    rows = -(-len(labels) // ncol)
+    height = 2.9 + 0.18 * rows  # the axes keep their height; the legend's rows below them
+    fig.set_size_inches(WIDTH_IN, height)
+    fig.legend(handles, labels, loc="lower center", ncol=ncol, frameon=False)
     fig.suptitle(f"Learning curves: mean over seeds;\n{BAND_TITLE}", fontsize=FONT_PT + 1)
-    fig.tight_layout(rect=(0, 0.06 + 0.05 * ((len(labels) - 1) // 3), 1, 1))
+    fig.tight_layout(rect=(0, (0.18 * rows + 0.1) / height, 1, 1))
     return fig
 
 
@@ -266,12 +281,19 @@ def failures_figure(groups: dict[str, list[RunMetrics]], settings: StudySettings
             ax.scatter(jitter, censored, s=36, marker="^", facecolors="none", edgecolors=colour, zorder=3)
             any_censored = True
     ax.set_xticks(range(1, len(groups) + 1))
+    crowded = len(groups) > 4 or max(len(label) for label in groups) > 24  # slanted, wrapped labels
     ax.set_xticklabels(
         [
-            f"{label}\n{sum(r.metrics['failures_before_k'] is None for r in runs)} censored of {len(runs)}"
+            f"{textwrap.fill(label, 24) if crowded else label}\n"
+            f"{sum(r.metrics['failures_before_k'] is None for r in runs)} censored of {len(runs)}"
             for label, runs in groups.items()
-        ]
+        ],
+        rotation=35 if crowded else 0,
+        ha="right" if crowded else "center",
+        fontsize=FONT_PT - 1 if crowded else None,
     )
+    if crowded:
+        fig.set_size_inches(WIDTH_IN, 3.3 + 1.4)
     ax.set_xlim(0.4, len(groups) + 0.6)
     ax.set_ylim(bottom=0)
     ax.set_ylabel(f"failures before K={settings.k}\ndistinct good gaits (trials)")
