@@ -32,13 +32,10 @@ from sfl_brain.report.study import (  # noqa: E402
     Claim,
     RunMetrics,
     StudySettings,
-    _figure_file,
     bounded_cell,
     censored_cell,
     claims_table,
-    curves_figure,
-    eta_figure,
-    failures_figure,
+    study_figures,
     tradeoff_figure,
 )
 
@@ -400,9 +397,7 @@ def main() -> None:
         out = args.figures / walker
         out.mkdir(exist_ok=True)
         shown = {label: [run_metrics_of(r) for r in rs] for label, rs in groups.items()}
-        _figure_file(lambda shown=shown: curves_figure(shown, settings), out, "study_learning.png")
-        _figure_file(lambda shown=shown: eta_figure(shown), out, "study_best_eta.png")
-        _figure_file(lambda shown=shown: failures_figure(shown, settings), out, "study_failures_before_k.png")
+        study_figures(shown, settings, out)
     tradeoff_figure({WALKERS[w]["title"].split(",")[0]: p for w, p in panels.items()}, args.figures / "tradeoff.png")
     claim_lines, adjusted = claims_table(all_claims, ALPHA)
     explore_groups = {
@@ -605,8 +600,8 @@ page asks whether the same early warning, put in front of those optimisers (`pro
 
 Made by `bash docs/experiments/baselines.sh`: one `sfl study` per group set on each walker, then
 `docs/experiments/baselines_page.py` writes this page, its figures and `baselines/numbers.json` (every run's
-metrics, every claim's test) from the run folders. Each walker's section says which code made its runs and how many
-ran at once; wall times depend on the machine and on what ran beside them, and are not shown.
+metrics, every claim's test) from the run folders. Each walker's section says which code made its runs; wall times
+depend on the machine and on what ran beside them, and are not shown.
 
 **Groups.** `sfl` at a sweep of fixed vigilance (and, on the humanoid, adaptive vigilance from -0.15, §5.6.3);
 CMA-ES, TPE and the safe optimiser (`safe_bo`) each plain (`gate: off`) and gated. A gated group runs at the walker's

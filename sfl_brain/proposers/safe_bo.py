@@ -94,20 +94,22 @@ class SafeBO(Optimiser):
 
     def _p_success(self, draws: np.ndarray) -> np.ndarray:
         from sklearn.gaussian_process import GaussianProcessClassifier
-        from sklearn.gaussian_process.kernels import ConstantKernel, Matern
 
-        kernel = ConstantKernel(4.0, "fixed") * Matern(self.params.length_scale, "fixed", nu=2.5)
-        model = GaussianProcessClassifier(kernel=kernel, optimizer=None)
+        model = GaussianProcessClassifier(kernel=self._success_kernel(), optimizer=None)
         model.fit(np.asarray(self.points), np.asarray(self.successes))
         return model.predict_proba(draws)[:, list(model.classes_).index(True)]
 
+    def _success_kernel(self):
+        """The success classifier's kernel: a fixed Matérn 5/2 of ``length_scale``, scaled."""
+        from sklearn.gaussian_process.kernels import ConstantKernel, Matern
+
+        return ConstantKernel(4.0, "fixed") * Matern(self.params.length_scale, "fixed", nu=2.5)
+
     def _failure_likeness(self, draws: np.ndarray) -> np.ndarray:
-        """Each draw's largest kernel correlation with a failure (the classifier's Matérn): with failures only, the
+        """Each draw's largest kernel covariance with a failure (the classifier's kernel): with failures only, the
         classifier cannot be fitted (one class), and a Gaussian-process model of success falls the most near a
         failure, so this orders the draws as its P(s | x) would, most likely success first when sorted up."""
-        from sklearn.gaussian_process.kernels import Matern
-
-        return Matern(self.params.length_scale, "fixed", nu=2.5)(draws, np.asarray(self.points)).max(axis=1)
+        return self._success_kernel()(draws, np.asarray(self.points)).max(axis=1)
 
     def _expected_improvement(self, draws: np.ndarray) -> np.ndarray:
         from sklearn.gaussian_process import GaussianProcessRegressor

@@ -60,17 +60,9 @@ def plain(value: Any) -> Any:
     return value
 
 
-def _numpy_default(value: Any) -> Any:
-    """What the JSON encoder cannot hold itself, as :func:`plain` turns it: numpy arrays and scalars."""
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
-
-
-#: one row in one call of the C encoder; a non-finite float anywhere raises, and that row takes :func:`plain`'s path
-_FAST = json.JSONEncoder(separators=(",", ":"), allow_nan=False, default=_numpy_default)
+#: one row in one call of the C encoder, numpy values turned by :func:`plain`; a non-finite float the encoder sees
+#: raises, and that row takes :func:`plain`'s whole path
+_FAST = json.JSONEncoder(separators=(",", ":"), allow_nan=False, default=plain)
 
 
 def row_json(row: dict) -> str:

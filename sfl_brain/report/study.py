@@ -317,6 +317,16 @@ def _figure_file(build, out: Path, name: str) -> str:
     return name
 
 
+def study_figures(groups: dict[str, list[RunMetrics]], settings: StudySettings, out: Path) -> list[str]:
+    """The study's three figures of ``groups`` written to ``out``: learning curves, best eta, failures before K;
+    their file names."""
+    return [
+        _figure_file(lambda: curves_figure(groups, settings), out, "study_learning.png"),
+        _figure_file(lambda: eta_figure(groups), out, "study_best_eta.png"),
+        _figure_file(lambda: failures_figure(groups, settings), out, "study_failures_before_k.png"),
+    ]
+
+
 # --------------------------------------------------------------------------- the page
 def bounded_cell(values, digits: str = ".3g") -> str:
     """The mean of the finite ``values`` and its 95 % percentile bootstrap interval, ``mean [low, high]`` (``-``
@@ -429,11 +439,7 @@ def study_section(run_dirs: list[Path], out: Path, settings: StudySettings) -> t
         "",
     ]
     if shown:
-        figures = [
-            _figure_file(lambda: curves_figure(shown, settings), out, "study_learning.png"),
-            _figure_file(lambda: eta_figure(shown), out, "study_best_eta.png"),
-            _figure_file(lambda: failures_figure(shown, settings), out, "study_failures_before_k.png"),
-        ]
+        figures = study_figures(shown, settings, out)
         lines += [*group_table(shown, settings), "", *[f"![]({f})" for f in figures]]
     else:
         lines.append("No run completed: nothing to compare.")

@@ -547,11 +547,12 @@ def _close(
     wrong doing so, one line each, and the records as the tables read them (None if that step failed before).
     Every step runs whatever the others did: a full disk must not cost the summary."""
     cleanup = []
-    read: list[list[dict]] = []  # the records once, for the tables and the summary (a long run's are large)
+    rows: list[dict] | None = None  # the records read once, for the tables and the summary (a long run's are large)
 
     def tables() -> None:
-        read.append(read_records(run_dir))
-        write_tables(run_dir, plan.raw.get("space", []), plan.body_class.METRICS, rows=read[0])
+        nonlocal rows
+        rows = read_records(run_dir)
+        write_tables(run_dir, plan.raw.get("space", []), plan.body_class.METRICS, rows=rows)
 
     for part, step in (
         ("shutdown", lambda: sup.stop(grace=0.0 if stopping.signals > 1 else 3.0)),
@@ -567,7 +568,7 @@ def _close(
         except Exception as exc:  # noqa: BLE001 - reported in the summary, never raised
             cleanup.append(f"{type(exc).__name__}: {exc}")
             _log_internal(run_dir)
-    return cleanup, (read[0] if read else None)
+    return cleanup, rows
 
 
 def _judge_run(ended: _Ended, rows: list[dict], cleanup: list[str], stopping: _Stopping) -> None:
