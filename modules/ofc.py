@@ -32,6 +32,7 @@ class OFC(Module):
     """Qualitative adaptive reward rho for successful trials (eqs. 5.2-5.3)."""
 
     Params = OFCParams
+    emits_telemetry = False  # nothing to show: its values go out in replies and the records
 
     def reset(self, seed: int) -> None:
         self.graded = 0

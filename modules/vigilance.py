@@ -48,6 +48,7 @@ class Vigilance(Module):
     """Vigilance threshold s_vig: fixed, scheduled band (4.14) or adaptive (§5.6.3)."""
 
     Params = VigilanceParams
+    emits_telemetry = False  # nothing to show: its values go out in replies and the records
 
     def reset(self, seed: int) -> None:
         self.rng = np.random.default_rng(seed)

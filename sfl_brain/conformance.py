@@ -6,7 +6,8 @@ is deterministic (same seed, same replies to the same messages); messages surviv
 A body declares its signals as :class:`~sfl_brain.signals.Signal` s with unique names, senses
 as many values as it declares, each within its declared bounds, during a short trial driven by
 a controller that holds every command at zero; a controller names what it reads and writes
-(unique names) and returns one value per command. It raises ``AssertionError`` naming the module
+(unique names) and returns one value per command; a module that says it emits no telemetry
+(``emits_telemetry = False``) emits none when given a sink. It raises ``AssertionError`` naming the module
 and what failed. It imports no module implementation of its own.
 """
 
@@ -19,6 +20,7 @@ from . import messages as m
 from .body import Body, Controller, InProcessLink
 from .module import Module
 from .signals import SENSOR_SLACK, Signal, names
+from .telemetry import CaptureTelemetry
 
 
 def sample_messages(module: Module) -> list[m.Message]:
@@ -82,8 +84,9 @@ class _CheckedLink(InProcessLink):
         return super().step(frame)
 
 
-def _replies(cls: type[Module], seed: int) -> list:
+def _replies(cls: type[Module], seed: int, telemetry=None) -> list:
     module = cls(cls.Params(), seed=seed)
+    module.telemetry = telemetry
     if isinstance(module, Body):
         request = m.TrialRequest(trial_id=0, seed=seed, body_params={}, controller_params={}, log=False)
         if module.COMMANDS:
@@ -155,3 +158,7 @@ def check_module(cls: type[Module]) -> None:
     for a, b in zip(first, second, strict=True):
         assert _same(a, b), f"{name}: same seed gave different replies: {a} vs {b}"
     _replies(cls, 4)  # another seed runs too
+    if not cls.emits_telemetry:  # its host leaves Rerun unopened: check it has nothing to show, even when asked
+        seen = CaptureTelemetry()
+        _replies(cls, 3, seen)
+        assert not seen.items, f"{name} says emits_telemetry = False but emitted {sorted(seen.paths())}"

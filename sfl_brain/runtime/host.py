@@ -132,9 +132,9 @@ def make_recording(run_id: str, rrd: str | None, viewer: str | None):
 
 
 class LazyRecording:
-    """The process's Rerun recording, opened at its first use (:meth:`get`): a process whose modules emit no
-    telemetry (the OFC, vigilance, a body that logs nothing) never imports Rerun, about 0.8 s of CPU each, and
-    leaves no part in ``rerun/``. ``opened``: the recording, None until something used it."""
+    """The process's Rerun recording, opened at its first use (:meth:`get`): a process whose module says it emits
+    no telemetry (``emits_telemetry = False``: the OFC, vigilance) never imports Rerun, about 0.8 s of CPU each,
+    and leaves no part in ``rerun/``. ``opened``: the recording, None until something used it."""
 
     def __init__(self, run_id: str, rrd: str | None, viewer: str | None) -> None:
         self.run_id, self.rrd, self.viewer = run_id, rrd, viewer
@@ -155,13 +155,16 @@ class LazyRerunTelemetry:
         self._args = (trial_seconds, batch_seconds)
         self.sink = None
 
-    def emit(self, item) -> None:
+    def open(self):
         if self.sink is None:
             from ..recording.rerun_sink import RerunTelemetry
 
             trial_seconds, batch_seconds = self._args
             self.sink = RerunTelemetry(self.recording.get(), self.entity, self.rates, trial_seconds, batch_seconds)
-        self.sink.emit(item)
+        return self.sink
+
+    def emit(self, item) -> None:
+        (self.sink or self.open()).emit(item)
 
     def close(self) -> None:
         if self.sink is not None:
@@ -182,7 +185,9 @@ def make_telemetry(
     into ``maps.parquet`` at the end of the run); sampled at the rates of the scenario's ``record:``.
     ``live``: a viewer watches, so series are sent at least every 2 s. ``trial_seconds``: where each
     trial starts on ``sim_time`` (``Plan.trial_seconds``). None when the run does not record (nothing is
-    computed to be shown). Neither the recording nor the table is opened before the module emits."""
+    computed to be shown). The recording opens here for a module that emits telemetry
+    (:attr:`~sfl_brain.module.Module.emits_telemetry`), at its first item for one that says it emits none; the map
+    table at its first snapshot."""
     if rec is None:
         return None
     from ..recording.tables import MapTable
@@ -190,6 +195,8 @@ def make_telemetry(
     rates = Rates.from_record(record)
     table = MapTable(run_dir / "maps" / f"{part}.parquet", module=module.entity) if run_dir is not None else None
     rerun = LazyRerunTelemetry(rec, module.entity, rates, trial_seconds, batch_seconds=2.0 if live else None)
+    if module.emits_telemetry:  # opened now, before the module is ready: never inside a request's time-out
+        rerun.open()
     return TelemetryTee(rerun, table, rates=rates)
 
 
