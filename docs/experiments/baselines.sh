@@ -56,7 +56,14 @@ if [ -z "${PAGE_ONLY:-}" ]; then
             --out "$OUT/planar_explore/cma"
           $E --seeds 0,1 --set protocol.proposer.kind=tpe --vary protocol.proposer.gate=veto --out "$OUT/planar_explore/tpe"
           $E --seeds 10,11 --set 'protocol.proposer={kind: cma, gate: resample, restart_below: 0.05, restart_from: novel}' \
-            --out "$OUT/planar_explore/cma_restarts_0.05" ;;
+            --out "$OUT/planar_explore/cma_restarts_0.05"
+          # after the final groups, on dev seeds 10-12 only, with plain CMA-ES on the same seeds as the yardstick:
+          # the final restarts, and the same with a smaller step (sigma0 0.15) at the start and at every restart
+          D="$E --seeds 10,11,12"
+          $D --set protocol.proposer.kind=cma --out "$OUT/planar_explore/cma_dev"
+          $D --set "protocol.proposer=$GATED_CMA_RESTARTS" --out "$OUT/planar_explore/cma_restarts_dev"
+          $D --set 'protocol.proposer={kind: cma, gate: resample, restart_below: 0.1, restart_from: novel, sigma0: 0.15}' \
+            --out "$OUT/planar_explore/cma_restarts_sigma0.15" ;;
         humanoid/explore) ;;
         *) echo "unknown set $set" >&2; exit 2 ;;
       esac

@@ -561,7 +561,7 @@ def tradeoff_figure(panels: dict[str, dict[str, list[tuple[float, float]]]], pat
         rows = (len(handles) + 1) // 2
         fig.set_size_inches(WIDTH_IN, 3.4 + 0.17 * rows)
         fig.tight_layout(rect=(0, 0.17 * rows / (3.4 + 0.17 * rows) + 0.02, 1, 1))
-        fig.savefig(path, dpi=150)
+        fig.savefig(path, dpi=150, bbox_inches="tight")  # long labels: the legend whole
         plt.close(fig)
 
 
