@@ -8,7 +8,8 @@
 # is a `sfl study` (runs over processes, JOBS at once, default 1) into runs/baselines/<body>/<set>/; a study run again
 # keeps its finished runs and runs the others (docs/studies.md). Then docs/experiments/baselines_page.py reads every
 # run and writes the page, its figures and its claims (docs/results/baselines.md, docs/results/baselines/).
-#   bash docs/experiments/baselines.sh                         # everything: about 2 h planar, 3 h humanoid on 2 cores
+#   JOBS=2 bash docs/experiments/baselines.sh                  # everything; on 2 cores about 35 min planar and 1.5 h
+#                                                              # humanoid (2026-11-28: 40 humanoid runs in 70 min)
 #   BODIES=planar SETS="sfl plain" bash docs/experiments/baselines.sh    # a part of it
 #   PAGE_ONLY=1 bash docs/experiments/baselines.sh             # the page from the runs there are
 set -euo pipefail
