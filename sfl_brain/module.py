@@ -60,10 +60,9 @@ class Module:
     handles: ClassVar[dict[type[Message], str]] = {}
     #: message types this module sends to others and needs a producer for
     requires: ClassVar[tuple[type[Message], ...]] = ()
-    #: False: this module never hands anything to ``self.telemetry`` (the OFC, vigilance), so its host leaves
-    #: Rerun unimported (about 0.8 s of CPU) and opens the recording only if something is emitted after all. True
-    #: (the default): the recording opens at start-up, before the module is ready, so the cost never falls
-    #: inside a request and counts against ``timeouts.request``
+    #: False: this module has nothing to show (the OFC, vigilance): its host gives it no sink (``self.telemetry``
+    #: stays None) and leaves Rerun unimported (about 0.8 s of CPU). True (the default): the recording opens at
+    #: start-up, before the module is ready, so the cost never falls inside a request and its ``timeouts.request``
     emits_telemetry: ClassVar[bool] = True
 
     def __init_subclass__(cls, **kwargs: Any) -> None:

@@ -592,7 +592,7 @@ def page(sections, explore_groups, targets, claim_lines, goal_lines, said, left_
                 "",
                 *groups_table(groups, targets[walker]),
                 "",
-                "Seeds: " + seeds_of(groups) + ".",
+                "Seeds: " + seeds_of(groups) + ". " + made_at([r for rs in groups.values() for r in rs]),
                 "",
                 explore_against_plain(groups, sections[walker]),
                 "",

@@ -132,9 +132,9 @@ def make_recording(run_id: str, rrd: str | None, viewer: str | None):
 
 
 class LazyRecording:
-    """The process's Rerun recording, opened at its first use (:meth:`get`): a process whose module says it emits
-    no telemetry (``emits_telemetry = False``: the OFC, vigilance) never imports Rerun, about 0.8 s of CPU each,
-    and leaves no part in ``rerun/``. ``opened``: the recording, None until something used it."""
+    """The process's Rerun recording, opened by the first sink made on it (:meth:`get`): a process whose module
+    says it emits no telemetry (``emits_telemetry = False``: the OFC, vigilance) makes none, never imports Rerun
+    (about 0.8 s of CPU) and leaves no part in ``rerun/``. ``opened``: the recording, None until then."""
 
     def __init__(self, run_id: str, rrd: str | None, viewer: str | None) -> None:
         self.run_id, self.rrd, self.viewer = run_id, rrd, viewer
@@ -144,31 +144,6 @@ class LazyRecording:
         if self.opened is None:
             self.opened = make_recording(self.run_id, self.rrd, self.viewer)
         return self.opened
-
-
-class LazyRerunTelemetry:
-    """A module's Rerun telemetry (:class:`~sfl_brain.recording.rerun_sink.RerunTelemetry`), made at its first
-    item, and the recording with it."""
-
-    def __init__(self, recording: LazyRecording, entity: str, rates: Rates, trial_seconds, batch_seconds) -> None:
-        self.recording, self.entity, self.rates = recording, entity, rates
-        self._args = (trial_seconds, batch_seconds)
-        self.sink = None
-
-    def open(self):
-        if self.sink is None:
-            from ..recording.rerun_sink import RerunTelemetry
-
-            trial_seconds, batch_seconds = self._args
-            self.sink = RerunTelemetry(self.recording.get(), self.entity, self.rates, trial_seconds, batch_seconds)
-        return self.sink
-
-    def emit(self, item) -> None:
-        (self.sink or self.open()).emit(item)
-
-    def close(self) -> None:
-        if self.sink is not None:
-            self.sink.close()
 
 
 def make_telemetry(
@@ -185,18 +160,17 @@ def make_telemetry(
     into ``maps.parquet`` at the end of the run); sampled at the rates of the scenario's ``record:``.
     ``live``: a viewer watches, so series are sent at least every 2 s. ``trial_seconds``: where each
     trial starts on ``sim_time`` (``Plan.trial_seconds``). None when the run does not record (nothing is
-    computed to be shown). The recording opens here for a module that emits telemetry
-    (:attr:`~sfl_brain.module.Module.emits_telemetry`), at its first item for one that says it emits none; the map
-    table at its first snapshot."""
-    if rec is None:
+    computed to be shown), and for a module that says it emits none (:attr:`~sfl_brain.module.Module.emits_telemetry`).
+    The recording opens here, before the module is ready, so that importing Rerun never falls inside a request's
+    time-out; the map table at its first snapshot."""
+    if rec is None or not module.emits_telemetry:
         return None
+    from ..recording.rerun_sink import RerunTelemetry
     from ..recording.tables import MapTable
 
     rates = Rates.from_record(record)
     table = MapTable(run_dir / "maps" / f"{part}.parquet", module=module.entity) if run_dir is not None else None
-    rerun = LazyRerunTelemetry(rec, module.entity, rates, trial_seconds, batch_seconds=2.0 if live else None)
-    if module.emits_telemetry:  # opened now, before the module is ready: never inside a request's time-out
-        rerun.open()
+    rerun = RerunTelemetry(rec.get(), module.entity, rates, trial_seconds, batch_seconds=2.0 if live else None)
     return TelemetryTee(rerun, table, rates=rates)
 
 
