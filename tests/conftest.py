@@ -52,6 +52,7 @@ def pytest_configure(config) -> None:
     shares, two workers' runs would pin their pairs to the same last core and leave the other idle, and a body
     starved there can miss its liveliness lease. With shares, each worker's runs see the cores of its share
     only, as under ``taskset``, which the framework respects."""
+    cache_bytecode(config)
     worker = os.environ.get("PYTEST_XDIST_WORKER", "")
     count = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
     if not worker.startswith("gw") or count < 2 or not hasattr(os, "sched_setaffinity"):
@@ -62,6 +63,29 @@ def pytest_configure(config) -> None:
     os.environ.setdefault(ALL_CORES, ",".join(map(str, cores)))
     if len(cores) >= count:
         pin(cores[int(worker[2:]) % count :: count])  # a worker that replaces a crashed one is gw<count> or more
+
+
+#: the temporary bytecode cache of a test session started with PYTHONDONTWRITEBYTECODE set (see cache_bytecode)
+BYTECODE_CACHE = "SFL_TEST_BYTECODE_CACHE"
+
+
+def cache_bytecode(config) -> None:
+    """Under ``PYTHONDONTWRITEBYTECODE``, every process a test starts (about 600 module hosts and ``sfl`` commands)
+    compiled ``sfl_brain``, ``modules`` and ``bodies`` from source again: an editable install has no bytecode
+    that pip compiled, and nothing may write it. That is about 0.1 s of CPU per process. The session (the process
+    that starts the xdist workers, before it starts them) gives itself and everything it starts a bytecode cache
+    outside the source tree instead (``PYTHONPYCACHEPREFIX``, a temporary folder removed at its end), so the
+    source tree stays as the variable asked and each file is compiled once per session."""
+    if os.environ.get(BYTECODE_CACHE) or not os.environ.get("PYTHONDONTWRITEBYTECODE"):
+        return  # a worker (the session set it up) or a machine that writes bytecode anyway
+    import shutil
+    import tempfile
+
+    cache = tempfile.mkdtemp(prefix="sfl-test-pycache-")
+    os.environ[BYTECODE_CACHE] = os.environ["PYTHONPYCACHEPREFIX"] = cache
+    del os.environ["PYTHONDONTWRITEBYTECODE"]
+    sys.pycache_prefix, sys.dont_write_bytecode = cache, False
+    config.add_cleanup(lambda: shutil.rmtree(cache, ignore_errors=True))
 
 
 #: the cores the test session may use, before each xdist worker was pinned to its share
