@@ -106,6 +106,12 @@ def on_all_cores() -> None:
     os.sched_setaffinity(0, all_cores())
 
 
+def argv_of(process) -> list[str]:
+    """A ``psutil.Process``'s command line as ``ps`` shows it, word by word: a module process forked from its run's
+    fork server (:mod:`sfl_brain.runtime.zygote`) sets its title as one string, ``... host --name NAME``."""
+    return " ".join(process.cmdline()).split()
+
+
 def sfl(*args: str, timeout: float = 300, **kw) -> subprocess.CompletedProcess:
     """Run the real ``sfl`` command in a subprocess."""
     return subprocess.run(

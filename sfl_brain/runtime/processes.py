@@ -1,6 +1,7 @@
 """Module processes: start one with its spec on stdin, report its exit, stop them all.
 
-Each module instance runs as ``python -m sfl_brain.runtime.host --name NAME`` (the name is for ``ps``; the
+Each module instance runs as ``python -m sfl_brain.runtime.host --name NAME``, forked from the run's fork server
+(:mod:`.zygote`) where there is one (the name is for ``ps``; the
 spec, with the run secret, goes on stdin, which stays open: its end tells the host that the
 parent is gone). A thread per process waits for its exit and posts an :class:`Exited` to the
 supervisor's queue; nothing else here runs in the background. Nothing here imports Zenoh.
@@ -21,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..scenario.plan import Instance
+from .zygote import Forked, ForkServer
 
 log = logging.getLogger("sfl.processes")
 
@@ -31,7 +33,7 @@ class Child:
 
     instance: Instance
     log_path: Path
-    proc: subprocess.Popen | None = None
+    proc: subprocess.Popen | Forked | None = None
     restarts: int = 0
     alive: bool = False
     stopping: bool = False
@@ -61,18 +63,22 @@ class Exited:
     generation: int
 
 
-def start(child: Child, spec: dict, on_exit: Callable[[Exited], None]) -> None:
-    """Start ``child``'s host process, ``spec`` on its stdin and output to its log; ``on_exit`` gets the exit."""
+def start(child: Child, spec: dict, on_exit: Callable[[Exited], None], server: ForkServer | None = None) -> None:
+    """Start ``child``'s host process, ``spec`` on its stdin and output to its log; ``on_exit`` gets the exit.
+    With a fork ``server`` (:mod:`.zygote`) the process is forked from it, else (or once it is gone) started anew."""
     logf = open(child.log_path, "ab")  # noqa: SIM115 - handed to the child
     child.generation += 1
     child.alive = False
-    child.proc = proc = subprocess.Popen(
-        [sys.executable, "-m", "sfl_brain.runtime.host", "--name", child.name],  # the name only, for ps
-        stdin=subprocess.PIPE,
-        stdout=logf,
-        stderr=subprocess.STDOUT,
-        start_new_session=True,  # Ctrl-C reaches the supervisor only; it stops the children
-    )
+    proc = server.spawn(child.name, logf) if server is not None else None
+    if proc is None:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "sfl_brain.runtime.host", "--name", child.name],  # the name only, for ps
+            stdin=subprocess.PIPE,
+            stdout=logf,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,  # Ctrl-C reaches the supervisor only; it stops the children
+        )
+    child.proc = proc
     logf.close()
     try:  # the spec (with the secret) on stdin, never on the command line; stdin stays open
         proc.stdin.write(json.dumps(spec).encode() + b"\n")

@@ -71,6 +71,7 @@ from .pairs import UNIX_PATH_MAX, Pairs, initial_placement, lockstep_pairs  # no
 from .processes import Child, Exited, kill_quietly, log_tail
 from .ticklink import WATCHED_WAIT, ControllerHung, LinkError  # noqa: F401 - LinkError: as RETRYABLE
 from .watch import WATCH_PERIOD, HangWatch, watched_units  # noqa: F401 - watched_units: as before issue 30
+from .zygote import ForkServer
 
 __all__ = ["RUN_TOKEN", "Interrupted", "RunError", "Supervisor", "hosted_spec", "kill_quietly", "log_tail"]
 
@@ -152,6 +153,8 @@ class Supervisor:
         #: what each module process got done (:mod:`.liveness`), and the look at those the run waits on
         self.board: ProgressBoard | None = None
         self.watch = HangWatch(plan, self.events)
+        #: the run's fork server (:mod:`.zygote`), which the module processes are forked from; None without one
+        self.forks: ForkServer | None = None
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:
@@ -163,6 +166,9 @@ class Supervisor:
         self.board = ProgressBoard(self.private, [inst.name for inst in self.plan.instances])
         self.pairs.link(self.private)
         self._declare_run()
+        references = [i.reference for i in self.plan.instances]
+        references += [i.colocated.reference for i in self.plan.instances if i.colocated is not None]
+        self.forks = ForkServer.start(references, self.run_dir / "logs" / "zygote.log")
         for inst in self.plan.instances:
             child = Child(inst, self.run_dir / "logs" / f"{inst.name}.log")
             self.children[inst.name] = child
@@ -253,11 +259,14 @@ class Supervisor:
         child.nonce = os.urandom(8).hex()
         spec = self.spec_for(child.instance)
         spec["nonce"] = child.nonce
-        processes.start(child, spec, self._inbox.put)
+        processes.start(child, spec, self._inbox.put, self.forks)
 
     def stop(self, grace: float = 3.0) -> None:
         """Stop every child: SIGTERM, then SIGKILL after ``grace`` seconds; close the session."""
         processes.stop_all(self.children.values(), grace)
+        if self.forks is not None:
+            self.forks.close()
+            self.forks = None
         if self._liveliness is not None:
             self._liveliness.undeclare()
             self._liveliness = None

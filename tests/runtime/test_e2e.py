@@ -17,7 +17,7 @@ from sfl_brain.recording.records import read_records
 from sfl_brain.runtime import bus
 from sfl_brain.scenario import load
 
-from ..conftest import ROOT, SCENARIOS, Lines, joined_run, sfl, sfl_run, start_sfl_run, wait_for_trials
+from ..conftest import ROOT, SCENARIOS, Lines, argv_of, joined_run, sfl, sfl_run, start_sfl_run, wait_for_trials
 
 VOLATILE = {"wall_ms", "worker", "cpu_body_s", "cpu_controller_s"}
 
@@ -179,8 +179,13 @@ def test_ctrl_c_stops_every_child_and_keeps_records(tmp_path):
     its serve loop writes its drop counters last; one killed after the 3 s grace period would not,
     nor one still running a trial that ignored the stop), and the records stay whole."""
     proc, out, _, children = _long_walker_run(tmp_path, 2)
-    names = sorted(child.cmdline()[child.cmdline().index("--name") + 1] for child in children)
+    hosts = [child for child in children if "--name" in argv_of(child)]
+    names = sorted(argv_of(child)[argv_of(child).index("--name") + 1] for child in hosts)
     assert names == ["acc", "body", "controller", "ofc", "vigilance"]
+    # besides them only the run's fork server (sfl_brain.runtime.zygote), which they were forked from
+    others = [child for child in children if child not in hosts]
+    assert len(others) == 1 and "sfl_brain.runtime.zygote" in others[0].cmdline(), [c.cmdline() for c in others]
+    assert {child.ppid() for child in hosts} == {others[0].pid}
     proc.send_signal(signal.SIGINT)
     assert proc.wait(timeout=30) == 130
     gone, alive = psutil.wait_procs(children, timeout=1)

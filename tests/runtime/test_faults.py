@@ -12,7 +12,7 @@ from sfl_brain.protocols.local import run_local
 from sfl_brain.recording.records import read_records
 from sfl_brain.scenario import load
 
-from ..conftest import SCENARIOS, start_sfl_run, wait_for_trials
+from ..conftest import SCENARIOS, argv_of, start_sfl_run, wait_for_trials
 
 VOLATILE = {"wall_ms", "worker", "cpu_body_s", "cpu_controller_s"}
 WALKER = SCENARIOS / "quickstart.yaml"
@@ -28,7 +28,7 @@ def module_process(proc: subprocess.Popen, name: str) -> psutil.Process:
     Asked once trials are recorded: the protocol starts only when every module is alive."""
     for child in psutil.Process(proc.pid).children(recursive=True):
         try:
-            cmd = child.cmdline()
+            cmd = argv_of(child)
         except psutil.Error:
             continue
         if "--name" in cmd and cmd[cmd.index("--name") + 1] == name:
