@@ -122,3 +122,12 @@ def test_gym_benchmark_prints_the_door_against_the_bodys_own_tick():
     # per body: the body alone, the door unwrapped, through gymnasium.make, normalised; their ratios to the first
     figures(out, r"median +([\d.]+) us", count=8)
     figures(out, r"/ \(a\) +([\d.]+)", count=8)
+
+
+def test_startup_benchmark_prints_a_forked_run_against_one_started_anew():
+    out = bench("startup.py", "--repeats", "1", "--trials", "1", "--only", "analytic")
+    assert out.count("load average") == 2
+    figures(out, r"analytic +forked +wall +([\d.]+) s")
+    figures(out, r"analytic +anew +wall +([\d.]+) s")
+    figures(out, r"forked/anew: wall ([\d.]+),")
+    figures(out, r"forked/anew: wall [\d.]+, CPU ([\d.]+)")
