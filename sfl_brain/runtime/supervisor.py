@@ -168,7 +168,8 @@ class Supervisor:
         self._declare_run()
         references = [i.reference for i in self.plan.instances]
         references += [i.colocated.reference for i in self.plan.instances if i.colocated is not None]
-        self.forks = ForkServer.start(references, self.run_dir / "logs" / "zygote.log")
+        if self.forks is None:  # a second start keeps the first one's server
+            self.forks = ForkServer.start(references, self.run_dir / "logs" / "zygote.log")
         for inst in self.plan.instances:
             child = Child(inst, self.run_dir / "logs" / f"{inst.name}.log")
             self.children[inst.name] = child
@@ -263,10 +264,12 @@ class Supervisor:
 
     def stop(self, grace: float = 3.0) -> None:
         """Stop every child: SIGTERM, then SIGKILL after ``grace`` seconds; close the session."""
-        processes.stop_all(self.children.values(), grace)
-        if self.forks is not None:
-            self.forks.close()
-            self.forks = None
+        try:
+            processes.stop_all(self.children.values(), grace)
+        finally:
+            if self.forks is not None:
+                self.forks.close()
+                self.forks = None
         if self._liveliness is not None:
             self._liveliness.undeclare()
             self._liveliness = None

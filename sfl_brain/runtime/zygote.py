@@ -42,6 +42,8 @@ PRELOAD = ("sfl_brain.runtime.host", "sfl_brain.registry")
 #: the project's own packages: only their modules are imported ahead (a user's may do anything at import)
 OWN = ("sfl_brain.", "modules.", "bodies.")
 MAX_MESSAGE = 4096
+#: how long a fork request may wait for its answer (it takes milliseconds) before the server counts as gone
+SPAWN_TIMEOUT = 10.0
 
 
 def enabled() -> bool:
@@ -113,7 +115,14 @@ def serve(control: socket.socket, modules: list[str]) -> int:
         for fd in fds:
             os.close(fd)
         children.add(pid)
-        control.sendall(f"pid {pid}".encode())
+        # a pidfd, opened before anything could reap it: the supervisor signals and watches this process, never a
+        # later one that reuses its pid
+        pidfd = os.pidfd_open(pid) if hasattr(os, "pidfd_open") else None
+        try:
+            socket.send_fds(control, [f"pid {pid}".encode()], [pidfd] if pidfd is not None else [])
+        finally:
+            if pidfd is not None:
+                os.close(pidfd)
 
 
 def _reap(control: socket.socket, children: set[int]) -> None:
@@ -124,7 +133,10 @@ def _reap(control: socket.socket, children: set[int]) -> None:
             done, status = pid, 255 << 8
         if done:
             children.discard(pid)
-            control.sendall(f"exit {pid} {os.waitstatus_to_exitcode(status)}".encode())
+            try:
+                control.sendall(f"exit {pid} {os.waitstatus_to_exitcode(status)}".encode())
+            except OSError:  # the supervisor closed its end: nobody to tell
+                return
 
 
 def _child(name: str, fds: list[int], *close: object) -> None:
@@ -155,8 +167,8 @@ def _child(name: str, fds: list[int], *close: object) -> None:
 
         code = host.main(["--name", name])
         logging.shutdown()
-    except SystemExit as exc:
-        code = exc.code if isinstance(exc.code, int) else 1
+    except SystemExit as exc:  # as the interpreter ends on it: None is 0, an int itself, anything else printed and 1
+        code = 0 if exc.code is None else exc.code if isinstance(exc.code, int) else 1
         if not isinstance(exc.code, int) and exc.code is not None:
             print(exc.code, file=sys.stderr)
     except BaseException:  # noqa: BLE001 - printed to its log, as an uncaught exception would be
@@ -182,16 +194,26 @@ def main() -> int:
 
 # ------------------------------------------------------------------------------------------ the supervisor's end
 class Forked:
-    """A module process forked by the server, as much of :class:`subprocess.Popen` as the supervisor uses."""
+    """A module process forked by the server, as much of :class:`subprocess.Popen` as the supervisor uses. Signals go
+    through a pidfd where there is one (Linux 5.3 on), so never to a later process that reuses the pid: the server
+    reaps a child at once, before the supervisor hears of its end."""
 
-    def __init__(self, pid: int, stdin) -> None:
+    def __init__(self, pid: int, pidfd: int | None, stdin=None) -> None:
         self.pid = pid
+        self.pidfd = pidfd
         self.stdin = stdin
         self.returncode: int | None = None
         self._ended = threading.Event()
+        self._lock = threading.Lock()  # the pidfd is closed at the end, never while a signal goes through it
 
     def _exited(self, code: int) -> None:
-        self.returncode = code
+        with self._lock:
+            if self.returncode is not None:
+                return
+            self.returncode = code
+            if self.pidfd is not None:
+                os.close(self.pidfd)
+                self.pidfd = None
         self._ended.set()
 
     def poll(self) -> int | None:
@@ -203,8 +225,16 @@ class Forked:
         return self.returncode
 
     def send_signal(self, sig: int) -> None:
-        if self.returncode is None:  # never a pid that may have been reused
-            os.kill(self.pid, sig)
+        with self._lock:
+            if self.returncode is not None:  # as Popen: an ended process is not signalled
+                return
+            try:
+                if self.pidfd is not None:
+                    signal.pidfd_send_signal(self.pidfd, sig)
+                else:
+                    os.kill(self.pid, sig)
+            except ProcessLookupError:  # it ended, and its end is not reported yet (as Popen, bpo-40550)
+                pass
 
     def terminate(self) -> None:
         self.send_signal(signal.SIGTERM)
@@ -232,16 +262,21 @@ class ForkServer:
         if not enabled():
             return None
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
-        with open(log_path, "ab") as logf:
-            proc = subprocess.Popen(
-                [sys.executable, "-m", "sfl_brain.runtime.zygote", str(theirs.fileno()), *preloads(references)],
-                stdin=subprocess.DEVNULL,
-                stdout=logf,
-                stderr=subprocess.STDOUT,
-                pass_fds=[theirs.fileno()],
-                start_new_session=True,
-            )
-        theirs.close()
+        try:
+            with open(log_path, "ab") as logf:
+                proc = subprocess.Popen(
+                    [sys.executable, "-m", "sfl_brain.runtime.zygote", str(theirs.fileno()), *preloads(references)],
+                    stdin=subprocess.DEVNULL,
+                    stdout=logf,
+                    stderr=subprocess.STDOUT,
+                    pass_fds=[theirs.fileno()],
+                    start_new_session=True,
+                )
+        except BaseException:
+            ours.close()
+            raise
+        finally:
+            theirs.close()
         ours.settimeout(timeout)
         try:
             ready = ours.recv(MAX_MESSAGE) == b"ready"
@@ -273,7 +308,9 @@ class ForkServer:
                 except OSError:
                     return None
                 with self._answered:
-                    self._answered.wait_for(lambda: self._pids or self.gone)
+                    if not self._answered.wait_for(lambda: self._pids or self.gone, SPAWN_TIMEOUT):
+                        log.warning("the fork server did not fork within %g s: processes start anew", SPAWN_TIMEOUT)
+                        self.gone = True  # a stopped or wedged server: no more requests to it
                     if not self._pids:
                         return None
                     child = self._pids.pop(0)
@@ -288,15 +325,16 @@ class ForkServer:
     def _read(self) -> None:
         while True:
             try:
-                message = self.control.recv(MAX_MESSAGE).decode()
+                data, fds, _, _ = socket.recv_fds(self.control, MAX_MESSAGE, 1)
+                message = data.decode()
             except OSError:
-                message = ""
+                message, fds = "", []
             if not message:
                 break
             kind, _, rest = message.partition(" ")
             if kind == "pid":
                 with self._answered:  # made here, so that an exit that comes at once finds it
-                    child = self.children[int(rest)] = Forked(int(rest), None)
+                    child = self.children[int(rest)] = Forked(int(rest), fds[0] if fds else None)
                     self._pids.append(child)
                     self._answered.notify_all()
             elif kind == "exit":
@@ -326,20 +364,28 @@ class ForkServer:
 
 
 def _watch_orphan(child: Forked) -> None:
-    """A child whose server ended: its end is seen in ``/proc`` (gone, or a zombie nobody reaped yet); its exit code
-    is unknown (255)."""
+    """A child whose server ended: its end is seen on its pidfd (or, without one, in ``/proc``: gone, or a zombie
+    nobody reaped yet); its exit code is unknown (255)."""
     while child.returncode is None:
-        try:
-            with open(f"/proc/{child.pid}/stat", "rb") as f:
-                stat = f.read()
-            ended = stat[stat.rindex(b")") + 2 : stat.rindex(b")") + 3] in (b"Z", b"X")
-        except (OSError, ValueError):
-            ended = True
+        fd = child.pidfd
+        if fd is not None:
+            try:
+                ended = bool(select.select([fd], [], [], 0.05)[0])
+            except (OSError, ValueError):
+                ended = child.returncode is not None
+        else:
+            try:
+                with open(f"/proc/{child.pid}/stat", "rb") as f:
+                    stat = f.read()
+                ended = stat[stat.rindex(b")") + 2 : stat.rindex(b")") + 3] in (b"Z", b"X")
+            except (OSError, ValueError):
+                ended = True
+            if not ended:
+                time.sleep(0.05)
         if ended:
             log.warning("module process %d ended after its fork server: exit code unknown", child.pid)
             child._exited(255)
             return
-        time.sleep(0.05)
 
 
 if __name__ == "__main__":

@@ -15,7 +15,7 @@ from sfl_brain.recording.records import read_records
 from sfl_brain.runtime import zygote
 from sfl_brain.scenario import load
 
-from ..conftest import SCENARIOS, poll_until, sfl_run, start_sfl_run, trials_recorded, wait_for_trials
+from ..conftest import SCENARIOS, argv_of, poll_until, sfl_run, start_sfl_run, trials_recorded, wait_for_trials
 from .test_faults import module_process, stable
 
 WALKER = SCENARIOS / "quickstart.yaml"
@@ -72,3 +72,23 @@ def test_only_the_projects_own_modules_are_imported_ahead():
         "modules.acc:ACC",
     ]
     assert zygote.preloads(refs) == ["sfl_brain.bodies.planar_biped", "modules.acc"]
+
+
+def test_a_forked_host_given_no_spec_exits_1_saying_why_and_a_signal_after_its_end_goes_nowhere(tmp_path):
+    server = zygote.ForkServer.start([], tmp_path / "zygote.log")
+    assert server is not None, (tmp_path / "zygote.log").read_text()
+    try:
+        with open(tmp_path / "x.log", "ab") as logf:
+            child = server.spawn("x", logf)
+        assert psutil.Process(child.pid).ppid() == server.proc.pid
+        shown = psutil.Process(child.pid)
+        poll_until(lambda: argv_of(shown)[-2:] == ["--name", "x"], "ps to show the host's name", 10)
+        child.stdin.close()  # no spec: the host says so and exits 1, as python -m sfl_brain.runtime.host would
+        assert child.wait(timeout=30) == 1
+        assert "expected the JSON spec on the first line of stdin" in (tmp_path / "x.log").read_text()
+        assert child.pidfd is None  # closed at its end: nothing can signal a later process with its pid
+        child.kill()
+        child.send_signal(signal.SIGTERM)
+    finally:
+        server.close()
+    assert server.proc.returncode == 0
