@@ -62,7 +62,7 @@ class Module:
     requires: ClassVar[tuple[type[Message], ...]] = ()
     #: False: this module has nothing to show (the OFC, vigilance): its host gives it no sink (``self.telemetry``
     #: stays None) and leaves Rerun unimported (about 0.8 s of CPU). True (the default): the recording opens at
-    #: start-up, before the module is ready, so the cost never falls inside a request and its ``timeouts.request``
+    #: start-up, before the module is ready, so its cost never counts against a request's ``timeouts.request``
     emits_telemetry: ClassVar[bool] = True
 
     def __init_subclass__(cls, **kwargs: Any) -> None:

@@ -19,7 +19,8 @@ passed descriptors, answered ``pid PID``; ``exit PID CODE`` when a child ends (t
 reaps it; ``CODE`` as :attr:`subprocess.Popen.returncode`: negative for a signal). :class:`ForkServer` is that
 end: :meth:`ForkServer.spawn` returns a :class:`Forked`, which answers what the supervisor asks of a
 ``subprocess.Popen`` (``pid``, ``stdin``, ``poll``, ``wait``, ``send_signal``, ``kill``, ``returncode``).
-The server ends when the supervisor closes its end or dies. ``SFL_FORK_SERVER=0`` turns it off.
+The server ends when the supervisor closes its end or dies. ``SFL_FORK_SERVER=0`` turns it off; it is on
+Linux 5.3 or later only (:func:`enabled`).
 """
 
 from __future__ import annotations
@@ -33,7 +34,6 @@ import socket
 import subprocess
 import sys
 import threading
-import time
 
 log = logging.getLogger("sfl.zygote")
 
@@ -47,14 +47,16 @@ SPAWN_TIMEOUT = 10.0
 
 
 def enabled() -> bool:
-    """Whether runs fork their module processes (``SFL_FORK_SERVER=0``: no; and only where fork and descriptor
-    passing exist)."""
-    return (
-        os.environ.get("SFL_FORK_SERVER", "1") != "0"
-        and hasattr(os, "fork")
-        and hasattr(socket, "send_fds")
-        and hasattr(socket, "SOCK_SEQPACKET")
-    )
+    """Whether runs fork their module processes: not with ``SFL_FORK_SERVER=0``, and only on Linux 5.3 or later
+    (pidfds, by which the supervisor signals and watches exactly the process it forked; elsewhere, as on macOS,
+    where forking a process that imported numpy is not safe either, each process starts anew)."""
+    if os.environ.get("SFL_FORK_SERVER", "1") == "0" or not hasattr(os, "pidfd_open"):
+        return False
+    try:
+        os.close(os.pidfd_open(os.getpid()))
+    except OSError:  # a kernel before 5.3
+        return False
+    return True
 
 
 def preloads(references: list[str]) -> list[str]:
@@ -94,12 +96,11 @@ def serve(control: socket.socket, modules: list[str]) -> int:
     signal.signal(signal.SIGCHLD, lambda *_: None)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the supervisor's; it closes this end
     control.sendall(b"ready")
-    children: set[int] = set()
     while True:
         readable, _, _ = select.select([control, wake_r], [], [])
         if wake_r in readable:
             os.read(wake_r, 512)
-        _reap(control, children)
+        _reap(control)
         if control not in readable:
             continue
         try:
@@ -114,29 +115,28 @@ def serve(control: socket.socket, modules: list[str]) -> int:
             _child(name, fds, control, wake_r, wake_w)
         for fd in fds:
             os.close(fd)
-        children.add(pid)
         # a pidfd, opened before anything could reap it: the supervisor signals and watches this process, never a
         # later one that reuses its pid
-        pidfd = os.pidfd_open(pid) if hasattr(os, "pidfd_open") else None
+        pidfd = os.pidfd_open(pid)
         try:
-            socket.send_fds(control, [f"pid {pid}".encode()], [pidfd] if pidfd is not None else [])
+            socket.send_fds(control, [f"pid {pid}".encode()], [pidfd])
         finally:
-            if pidfd is not None:
-                os.close(pidfd)
+            os.close(pidfd)
 
 
-def _reap(control: socket.socket, children: set[int]) -> None:
-    for pid in list(children):
+def _reap(control: socket.socket) -> None:
+    """Reap every child that ended (the server's only children are the hosts it forked) and tell the supervisor."""
+    while True:
         try:
-            done, status = os.waitpid(pid, os.WNOHANG)
-        except ChildProcessError:
-            done, status = pid, 255 << 8
-        if done:
-            children.discard(pid)
-            try:
-                control.sendall(f"exit {pid} {os.waitstatus_to_exitcode(status)}".encode())
-            except OSError:  # the supervisor closed its end: nobody to tell
-                return
+            pid, status = os.waitpid(-1, os.WNOHANG)
+        except ChildProcessError:  # no child at all
+            return
+        if not pid:
+            return
+        try:
+            control.sendall(f"exit {pid} {os.waitstatus_to_exitcode(status)}".encode())
+        except OSError:  # the supervisor closed its end: nobody to tell
+            return
 
 
 def _child(name: str, fds: list[int], *close: object) -> None:
@@ -157,19 +157,16 @@ def _child(name: str, fds: list[int], *close: object) -> None:
         sys.stdout = open(1, "w", encoding="utf-8", buffering=1, closefd=False)  # noqa: SIM115
         sys.stderr = open(2, "w", encoding="utf-8", buffering=1, closefd=False)  # noqa: SIM115
         sys.argv = [sys.argv[0], "--name", name]
-        try:
-            import setproctitle
+        import setproctitle
 
-            setproctitle.setproctitle(f"{sys.executable} -m sfl_brain.runtime.host --name {name}")
-        except ImportError:
-            pass
+        setproctitle.setproctitle(f"{sys.executable} -m sfl_brain.runtime.host --name {name}")
         from . import host
 
         code = host.main(["--name", name])
         logging.shutdown()
     except SystemExit as exc:  # as the interpreter ends on it: None is 0, an int itself, anything else printed and 1
         code = 0 if exc.code is None else exc.code if isinstance(exc.code, int) else 1
-        if not isinstance(exc.code, int) and exc.code is not None:
+        if code == 1 and not isinstance(exc.code, int):
             print(exc.code, file=sys.stderr)
     except BaseException:  # noqa: BLE001 - printed to its log, as an uncaught exception would be
         import traceback
@@ -195,10 +192,10 @@ def main() -> int:
 # ------------------------------------------------------------------------------------------ the supervisor's end
 class Forked:
     """A module process forked by the server, as much of :class:`subprocess.Popen` as the supervisor uses. Signals go
-    through a pidfd where there is one (Linux 5.3 on), so never to a later process that reuses the pid: the server
-    reaps a child at once, before the supervisor hears of its end."""
+    through its pidfd, so never to a later process that reuses the pid: the server reaps a child at once, before the
+    supervisor hears of its end."""
 
-    def __init__(self, pid: int, pidfd: int | None, stdin=None) -> None:
+    def __init__(self, pid: int, pidfd: int, stdin=None) -> None:
         self.pid = pid
         self.pidfd = pidfd
         self.stdin = stdin
@@ -229,10 +226,7 @@ class Forked:
             if self.returncode is not None:  # as Popen: an ended process is not signalled
                 return
             try:
-                if self.pidfd is not None:
-                    signal.pidfd_send_signal(self.pidfd, sig)
-                else:
-                    os.kill(self.pid, sig)
+                signal.pidfd_send_signal(self.pidfd, sig)
             except ProcessLookupError:  # it ended, and its end is not reported yet (as Popen, bpo-40550)
                 pass
 
@@ -252,7 +246,7 @@ class ForkServer:
         self.control = control
         self.children: dict[int, Forked] = {}
         self._lock = threading.Lock()  # one fork request at a time: its answer is the next ``pid``
-        self._pids: list[Forked] = []  # forked, not yet handed to the caller
+        self._unclaimed: list[Forked] = []  # forked, not yet handed to the caller that asked
         self._answered = threading.Condition()
         self.gone = False
         self._reader = threading.Thread(target=self._read, daemon=True, name="zygote-reader")
@@ -285,11 +279,7 @@ class ForkServer:
         ours.settimeout(None)
         if not ready:
             ours.close()
-            try:
-                proc.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+            _end(proc)
             log.info("no fork server (see %s): module processes start on their own", log_path)
             return None
         server = cls(proc, ours)
@@ -308,12 +298,12 @@ class ForkServer:
                 except OSError:
                     return None
                 with self._answered:
-                    if not self._answered.wait_for(lambda: self._pids or self.gone, SPAWN_TIMEOUT):
+                    if not self._answered.wait_for(lambda: self._unclaimed or self.gone, SPAWN_TIMEOUT):
                         log.warning("the fork server did not fork within %g s: processes start anew", SPAWN_TIMEOUT)
                         self.gone = True  # a stopped or wedged server: no more requests to it
-                    if not self._pids:
+                    if not self._unclaimed:
                         return None
-                    child = self._pids.pop(0)
+                    child = self._unclaimed.pop(0)
                 child.stdin = os.fdopen(write, "wb")
                 write = None
                 return child
@@ -334,8 +324,8 @@ class ForkServer:
             kind, _, rest = message.partition(" ")
             if kind == "pid":
                 with self._answered:  # made here, so that an exit that comes at once finds it
-                    child = self.children[int(rest)] = Forked(int(rest), fds[0] if fds else None)
-                    self._pids.append(child)
+                    child = self.children[int(rest)] = Forked(int(rest), fds[0])
+                    self._unclaimed.append(child)
                     self._answered.notify_all()
             elif kind == "exit":
                 pid, code = map(int, rest.split())
@@ -355,33 +345,28 @@ class ForkServer:
         except OSError:
             pass
         self.control.close()
-        try:
-            self.proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
+        _end(self.proc)
         self._reader.join(timeout=5)
 
 
+def _end(proc: subprocess.Popen, grace: float = 5.0) -> None:
+    """Wait for the server to end (its end of the socket closed), killing it after ``grace`` s."""
+    try:
+        proc.wait(timeout=grace)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+
+
 def _watch_orphan(child: Forked) -> None:
-    """A child whose server ended: its end is seen on its pidfd (or, without one, in ``/proc``: gone, or a zombie
-    nobody reaped yet); its exit code is unknown (255)."""
+    """A child whose server ended: its end is seen on its pidfd (readable once it ended, reaped or not); its exit
+    code is unknown (255)."""
     while child.returncode is None:
         fd = child.pidfd
-        if fd is not None:
-            try:
-                ended = bool(select.select([fd], [], [], 0.05)[0])
-            except (OSError, ValueError):
-                ended = child.returncode is not None
-        else:
-            try:
-                with open(f"/proc/{child.pid}/stat", "rb") as f:
-                    stat = f.read()
-                ended = stat[stat.rindex(b")") + 2 : stat.rindex(b")") + 3] in (b"Z", b"X")
-            except (OSError, ValueError):
-                ended = True
-            if not ended:
-                time.sleep(0.05)
+        try:
+            ended = fd is not None and bool(select.select([fd], [], [], 0.05)[0])
+        except (OSError, ValueError):  # closed by its reported end meanwhile
+            ended = False
         if ended:
             log.warning("module process %d ended after its fork server: exit code unknown", child.pid)
             child._exited(255)
