@@ -29,10 +29,12 @@ GATED_CMA_RESTARTS='{kind: cma, gate: resample, restart_below: 0.1, restart_from
 GATED_TPE='{kind: tpe, gate: veto}'
 GATED_SAFE_BO='{kind: safe_bo, gate: veto}'
 
-study() {  # study BODY NAME ARGS...: one `sfl study` of the body's scenario into $OUT/BODY/NAME
-  local body=$1 name=$2 status=0
+study() {  # study BODY NAME ARGS...: one `sfl study` of the body's scenario into $OUT/BODY/NAME ($OUT/NAME if NAME
+  local body=$1 name=$2 status=0  # has a folder: FOLDER/STUDY)
+  local out="$OUT/$body/$name"
+  case "$name" in */*) out="$OUT/$name" ;; esac
   shift 2
-  sfl study "scenarios/baselines_$body.yaml" --seeds "$SEEDS" --jobs "$JOBS" --out "$OUT/$body/$name" "$@" || status=$?
+  sfl study "scenarios/baselines_$body.yaml" --seeds "$SEEDS" --jobs "$JOBS" --out "$out" "$@" || status=$?
   # a stalled or failed run is named by the study and left out of the page's means
   if [ "$status" -ne 0 ] && [ "$status" -ne 1 ] && [ "$status" -ne 3 ]; then exit "$status"; fi
 }
@@ -65,7 +67,9 @@ if [ -z "${PAGE_ONLY:-}" ]; then
           $D --set "protocol.proposer=$GATED_CMA_RESTARTS" --out "$OUT/planar_explore/cma_restarts_dev"
           $D --set 'protocol.proposer={kind: cma, gate: resample, restart_below: 0.1, restart_from: novel, sigma0: 0.15}' \
             --out "$OUT/planar_explore/cma_restarts_sigma0.15" ;;
-        humanoid/explore) ;;
+        humanoid/explore)  # the final gated CMA-ES and TPE at the vigilance of sfl's safest group (0), seeds 0-4
+          study humanoid humanoid_explore/gated_cma_svig0 --set "protocol.proposer=$GATED_CMA" --set modules.vigilance.params.value=0
+          study humanoid humanoid_explore/gated_tpe_svig0 --set "protocol.proposer=$GATED_TPE" --set modules.vigilance.params.value=0 ;;
         *) echo "unknown set $set" >&2; exit 2 ;;
       esac
     done
