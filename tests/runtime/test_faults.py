@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import subprocess
+import time
 
 import psutil
 import pytest
@@ -34,6 +35,20 @@ def module_process(proc: subprocess.Popen, name: str) -> psutil.Process:
         if "--name" in cmd and cmd[cmd.index("--name") + 1] == name:
             return child
     raise AssertionError(f"no process for {name}")
+
+
+def in_a_trial(process: psutil.Process, timeout: float = 60.0) -> None:
+    """Return once ``process`` (a body or its controller) is seen ticking a trial: it spent over half of the last
+    20 ms on a CPU (between trials both wait for the next request)."""
+    deadline = time.monotonic() + timeout
+    before = sum(process.cpu_times()[:2])
+    while time.monotonic() < deadline:
+        time.sleep(0.02)
+        now = sum(process.cpu_times()[:2])
+        if now - before > 0.01:
+            return
+        before = now
+    raise AssertionError(f"{process} was not seen in a trial within {timeout} s")
 
 
 @pytest.mark.parametrize("name", ["acc", "vigilance", "ofc"])
@@ -70,7 +85,9 @@ def test_kill_9_of_a_body_or_controller_restarts_it_and_retries_the_trial_at_onc
     ]
     proc = start_sfl_run(WALKER, out, *sets)
     wait_for_trials(out, 2, proc)
-    module_process(proc, name).kill()
+    victim = module_process(proc, name)
+    in_a_trial(victim)  # a kill between two trials, while the gate decides, would leave no trial to retry
+    victim.kill()
     stdout, stderr = proc.communicate(timeout=180)
     stderr = " ".join(stderr.split())
     assert proc.returncode == 0, stderr
