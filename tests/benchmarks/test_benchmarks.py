@@ -52,7 +52,7 @@ def test_bus_benchmark_prints_the_floors_bare_zenoh_and_the_framework_side_by_si
 def test_planar_benchmark_prints_the_trial_ratios_beside_the_floors():
     # the sweeps are whole `sfl run`s of the sweep protocol (tests/runtime/test_e2e.py runs one over two workers):
     # skipped here
-    out = bench("planar.py", "--repeats", "1", "--busy-repeats", "1", "--no-sweep")
+    out = bench("planar.py", "--repeats", "1", "--busy-repeats", "1", "--no-sweep", "--seconds", "2")
     assert "load average" in out
     figures(out, r"\(c\)/\(b\) = ([\d.]+)", count=2)  # alone, and beside one busy process
     figures(out, r"\(c-zenoh\)/\(b\) = ([\d.]+)", count=2)  # the ticks on a Zenoh link, the same two ways
