@@ -8,6 +8,12 @@
 2. **Downhill -> flat without switching**: per seed and neuron choice, the learnt downhill neuron (``switch{TAG}_sN``'s
    ``down_without`` trials), its walks onto the flat, and the share of its 8 nearest cells of the flat pre-sweep
    (``presweep``, in the space's unit cube) that walked the flat.
+3. **The feet's contacts at the edges** (the candidate named after 1: a foot overhanging a convex edge presses with
+   its heel or toe alone): per walk, each foot's heel-only and toe-only contact (``body/feet/heel_*``, ``toe_*`` >=
+   0.5) and the share of ticks with one point of contact of the four, averaged over the last ``CONTACT_WINDOW`` s;
+   the largest value any flat walk of the same runs that did not fall shows after its start ramp (5 s on) is that
+   pattern's band, and a pattern "fires" when it first exceeds it after the touch. Per case: walks where it fires,
+   the median latency, and how many fire within 0.5 s of the touch and before the torso passes 10 deg.
 
     python docs/experiments/e5_why.py runs/chapter5
 """
@@ -27,6 +33,10 @@ from sfl_brain.report.terrain import detector_of
 NEW_SLOPE = {"flatdown": -10.0, "upflat": 0.0, "up": 10.0, "down": 0.0}
 NEAR_DEG = 3.0  # a foot senses the new slope: its estimate within this of the new piece's slope
 TORSO_DEG = 10.0
+CONTACT_WINDOW = 0.33  # s, half a gait cycle (0.667 s): a foot's stance
+PRESSED = 0.5  # a heel or toe sensor at or above this presses (the adaptation's lying-flat test, circuit file)
+SETTLED = 5.0  # s: a walk's contacts count toward the band from here (after the 4-s start ramp)
+FEET = ["body/feet/heel_l", "body/feet/toe_l", "body/feet/heel_r", "body/feet/toe_r"]
 
 
 def table(path: Path) -> list[dict]:
@@ -72,6 +82,61 @@ def edge_times(runs: Path, tag: str) -> list[dict]:
     return rows
 
 
+def contact_patterns(heel_l, toe_l, heel_r, toe_r, n: int) -> dict[str, np.ndarray]:
+    """Each tick's share of the last ``n`` ticks with: a heel pressing and its toe not (either foot, the larger),
+    a toe pressing and its heel not, and one point of contact of the four."""
+
+    def share(x):
+        return np.convolve(x.astype(float), np.ones(n) / n)[: len(x)]
+
+    hl, tl, hr, tr = (np.asarray(v) >= PRESSED for v in (heel_l, toe_l, heel_r, toe_r))
+    return {
+        "heel only": np.maximum(share(hl & ~tl), share(hr & ~tr)),
+        "toe only": np.maximum(share(~hl & tl), share(~hr & tr)),
+        "one point": share((hl.astype(int) + tl + hr + tr) == 1),
+    }
+
+
+def contact_rows(runs: Path, tag: str) -> list[str]:
+    walks = []
+    for seed in range(3):
+        run = runs / f"detectors{tag}_s{seed}"
+        rrd = run / "recording.rrd"
+        series = read_series(rrd, [*FEET, "body/torso/pitch"])
+        touched = read_events(rrd, ["body/events/terrain"])["body/events/terrain"]
+        for t in table(run / "trials.parquet"):
+            trial = int(t["trial"])
+            if trial not in series[FEET[0]]:
+                continue
+            times = series[FEET[0]][trial].times
+            n = max(1, int(round(CONTACT_WINDOW / float(np.median(np.diff(times))))))
+            patterns = contact_patterns(*(series[f][trial].values for f in FEET), n)
+            t0 = touched[trial].times[0] if trial in touched else None
+            pitch = series["body/torso/pitch"][trial]
+            tilted = (pitch.times >= (t0 or 0.0)) & (np.abs(pitch.values) > TORSO_DEG)
+            t10 = pitch.times[tilted][0] - t0 if t0 is not None and tilted.any() else np.inf
+            walks.append((t["condition"], times, patterns, t0, t10, not t["m_fell"]))
+    flat = [w for w in walks if w[0] == "flat" and w[5]]  # a band is measured on walks that did not fall
+    lines = [f"| pattern | flat band | {' | '.join(NEW_SLOPE)} |", "|---|---|" + "---|" * len(NEW_SLOPE)]
+    for name in ("heel only", "toe only", "one point"):
+        band = max(float(p[name][times >= SETTLED].max()) for _, times, p, _, _, _ in flat)
+        cells = []
+        for case in NEW_SLOPE:
+            latency, t10 = [], []
+            for c, times, p, t0, tilt, _ in walks:
+                if c == case and t0 is not None:
+                    above = (times >= t0) & (p[name] > band)
+                    latency.append(times[above][0] - t0 if above.any() else np.inf)
+                    t10.append(tilt)
+            latency, t10 = np.array(latency), np.array(t10)
+            fired = np.isfinite(latency)
+            early = int(((latency <= 0.5) & (latency < t10)).sum())
+            when = f"{median(latency[fired]):.2f} s" if fired.any() else "-"
+            cells.append(f"{fired.sum()}/{len(latency)}, {when}, {early} early")
+        lines.append(f"| {name} | {band:.2f} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def downhill_without(runs: Path, tag: str) -> list[str]:
     sweep = table(runs / "presweep" / "trials.parquet")
     axes = ["gain_pitch", "gain_roll", "sigma_s"]
@@ -114,6 +179,10 @@ def main(argv: list[str]) -> int:
                 f"{TORSO_DEG:g} deg in {sum(r['feet'] < r['torso_past_10deg'] for r in fired)} (median "
                 f"{median([r['torso_past_10deg'] - r['feet'] for r in fired]):.2f} s before)"
             )
+        print(f"\nthe feet's contacts, each pattern's share of the last {CONTACT_WINDOW:g} s (fires: walks where it")
+        print("exceeds the flat walks' band after the touch, the median latency, and how many within 0.5 s and before")
+        print(f"the torso passed {TORSO_DEG:g} deg):")
+        print("\n".join(contact_rows(runs, tag)))
         print("\ndownhill -> flat without switching:")
         print("\n".join(downhill_without(runs, tag)), "\n")
     return 0
