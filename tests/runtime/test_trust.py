@@ -121,8 +121,8 @@ def test_garbage_on_every_key_of_a_running_run_changes_nothing(tmp_path):
             while run.proc.poll() is None:
                 stranger.spray(rounds)
                 rounds += 1
-                try:  # pace the rounds: the run goes on meanwhile
-                    run.proc.wait(timeout=0.05)
+                try:  # pace the rounds (each covers every key): the run goes on meanwhile
+                    run.proc.wait(timeout=0.5)
                 except Exception:
                     pass
         finally:
