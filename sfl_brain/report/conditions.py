@@ -30,7 +30,6 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from scipy import stats  # noqa: E402
 
 from ..recording.recorded import read_events, read_labels, read_series  # noqa: E402
 from ..recording.records import read_records  # noqa: E402
@@ -45,6 +44,8 @@ def is_conditions_run(scenario: dict) -> bool:
 
 def wilson(k: int, n: int, confidence: float = CONFIDENCE) -> tuple[float, float]:
     """The Wilson score interval of a rate k / n (NaN, NaN with no trial)."""
+    from scipy import stats  # here: scipy.stats costs about 0.75 s to import
+
     if n == 0:
         return math.nan, math.nan
     ci = stats.binomtest(k, n).proportion_ci(confidence_level=confidence, method="wilson")
@@ -53,6 +54,8 @@ def wilson(k: int, n: int, confidence: float = CONFIDENCE) -> tuple[float, float
 
 def mcnemar_exact(pairs: list[tuple[bool, bool]]) -> tuple[float, int, int]:
     """Two-sided exact McNemar test of paired outcomes (a, b): (p, pairs where only a survived, where only b did)."""
+    from scipy import stats  # here: scipy.stats costs about 0.75 s to import
+
     only_a = sum(1 for a, b in pairs if a and not b)
     only_b = sum(1 for a, b in pairs if b and not a)
     if only_a + only_b == 0:
@@ -62,6 +65,8 @@ def mcnemar_exact(pairs: list[tuple[bool, bool]]) -> tuple[float, int, int]:
 
 def fisher_exact(k1: int, n1: int, k2: int, n2: int) -> float:
     """Two-sided Fisher exact test of k1 / n1 against k2 / n2."""
+    from scipy import stats  # here: scipy.stats costs about 0.75 s to import
+
     if n1 == 0 or n2 == 0:
         return math.nan
     return float(stats.fisher_exact([[k1, n1 - k1], [k2, n2 - k2]]).pvalue)

@@ -32,7 +32,6 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
 #: resamples of a bootstrap interval; its generator's seed (the same page from the same runs)
 BOOTSTRAP_RESAMPLES = 10_000
@@ -144,6 +143,8 @@ def paired_log_t(a: Sequence[float], b: Sequence[float], confidence: float = 0.9
     """Paired t-test of log(a + shift) - log(b + shift), seed by seed (``a[i]`` and ``b[i]`` the same seed): the
     effect is the geometric mean ratio (a + shift) / (b + shift) with its t-interval, back from the log scale (always
     positive). ``shift`` 1 for counts (a run without a failure stays finite), 0 for positive values (eta)."""
+    from scipy import stats  # here: scipy.stats costs about 0.75 s to import
+
     x, y = _log(a, shift), _log(b, shift)
     if x.size != y.size:
         raise ValueError(f"paired samples of different sizes: {x.size} and {y.size}")
@@ -170,6 +171,8 @@ def paired_log_t(a: Sequence[float], b: Sequence[float], confidence: float = 0.9
 def welch_log_t(a: Sequence[float], b: Sequence[float], confidence: float = 0.95, shift: float = 1.0) -> Test:
     """Welch's t-test of log(a + shift) against log(b + shift) (unpaired, unequal variances): the effect is the ratio
     of the geometric means of (a + shift) and (b + shift) with its Welch interval, back from the log scale."""
+    from scipy import stats  # here: scipy.stats costs about 0.75 s to import
+
     x, y = _log(a, shift), _log(b, shift)
     if x.size < 2 or y.size < 2:
         raise ValueError("Welch's test needs two values or more in each group")
@@ -203,6 +206,8 @@ def censored_rank_test(
     Mann-Whitney's U (exact when there are no ties, two-sided), each censored value taken where it hurts the claim
     "a < b" most: a censored run of ``a`` at +infinity, one of ``b`` at its lower bound. A small p supports the
     claim whatever the censored runs would have given; the effect is the difference of the medians so taken."""
+    from scipy import stats  # here: scipy.stats costs about 0.75 s to import
+
     x = np.where(np.asarray(a_censored, dtype=bool), np.inf, _finite(a))
     y = _finite(b)
     if x.size < 1 or y.size < 1:
@@ -221,6 +226,8 @@ def censored_rank_test(
 def sign_test(differences: Sequence[float]) -> Test:
     """Exact two-sided sign test that the differences (e.g. gated minus plain, seed by seed) are as often above 0 as
     below (zeros dropped); the effect is the share of non-zero differences above 0."""
+    from scipy import stats  # here: scipy.stats costs about 0.75 s to import
+
     d = _finite(differences)
     d = d[d != 0]
     if d.size == 0:
