@@ -66,7 +66,14 @@ if [ -z "${PAGE_ONLY:-}" ]; then
           $D --set protocol.proposer.kind=cma --out "$OUT/planar_explore/cma_dev"
           $D --set "protocol.proposer=$GATED_CMA_RESTARTS" --out "$OUT/planar_explore/cma_restarts_dev"
           $D --set 'protocol.proposer={kind: cma, gate: resample, restart_below: 0.1, restart_from: novel, sigma0: 0.15}' \
-            --out "$OUT/planar_explore/cma_restarts_sigma0.15" ;;
+            --out "$OUT/planar_explore/cma_restarts_sigma0.15"
+          # the gate's vigilance scheduled by (4.14), cautious first and adventurous later, beside the same gated
+          # optimisers at a fixed s_vig 0 and sfl at s_vig 0 on the same dev seeds
+          $D --set "protocol.proposer=$GATED_CMA" --set modules.vigilance.params.mode=scheduled --out "$OUT/planar_explore/cma_sched_dev"
+          $D --set "protocol.proposer=$GATED_TPE" --set modules.vigilance.params.mode=scheduled --out "$OUT/planar_explore/tpe_sched_dev"
+          $D --set "protocol.proposer=$GATED_CMA" --out "$OUT/planar_explore/cma_gated_dev"
+          $D --set "protocol.proposer=$GATED_TPE" --out "$OUT/planar_explore/tpe_gated_dev"
+          $D --set modules.vigilance.params.value=0 --out "$OUT/planar_explore/sfl_dev" ;;
         humanoid/explore)  # the final gated CMA-ES and TPE at the vigilance of sfl's safest group (0), seeds 0-4
           study humanoid humanoid_explore/gated_cma_svig0 --set "protocol.proposer=$GATED_CMA" --set modules.vigilance.params.value=0
           study humanoid humanoid_explore/gated_tpe_svig0 --set "protocol.proposer=$GATED_TPE" --set modules.vigilance.params.value=0 ;;
