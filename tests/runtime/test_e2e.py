@@ -145,7 +145,7 @@ def test_dead_module_without_restart_is_reported_and_records_survive(tmp_path):
 
 def test_garbage_on_the_bus_is_logged_and_dropped(tmp_path):
     out = tmp_path / "run"
-    with joined_run(SCENARIOS / "analytic_learn.yaml", out, "protocol.trials=400", modules=4) as (
+    with joined_run(SCENARIOS / "analytic_learn.yaml", out, "protocol.trials=150", modules=4) as (
         proc,
         session,
         run_id,
@@ -162,7 +162,7 @@ def test_garbage_on_the_bus_is_logged_and_dropped(tmp_path):
         session.put(f"sfl/{run_id}/acc/acc.evaluate", b"not even a query")
     assert len(errors) == 4 and all(e.startswith("malformed request") for e in errors), errors
     assert proc.wait(timeout=240) == 0, proc.stderr.read()
-    assert json.loads((out / "summary.json").read_text())["trials"] == 400
+    assert json.loads((out / "summary.json").read_text())["trials"] == 150
     assert "dropped malformed request" in (out / "logs" / "acc.log").read_text()
 
 

@@ -45,12 +45,12 @@ def test_worker_needs_the_secret():
 
 def test_join_command_reproduces_overrides_and_seed_and_the_worker_exits_when_the_run_ends(tmp_path):
     out = tmp_path / "run"
-    with listening_run(LEARN, out, "protocol.trials=600", modules=4) as run:
-        assert "--set protocol.trials=600" in run.join and "--seed 1" in run.join
+    with listening_run(LEARN, out, "protocol.trials=300", modules=4) as run:
+        assert "--set protocol.trials=300" in run.join and "--seed 1" in run.join
         assert f"--secret-file {out / 'secret'}" in run.join
         joined = worker(
             str(LEARN), "--connect", run.endpoint, "--run-id", run.run_id,
-            "--set", "protocol.trials=600", "--secret-file", str(out / "secret"),
+            "--set", "protocol.trials=300", "--secret-file", str(out / "secret"),
         )  # fmt: skip
         assert run.proc.wait(timeout=240) == 0, run.proc.stderr.read()
         assert joined.wait(timeout=30) == 0  # its run ended
