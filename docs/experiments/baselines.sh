@@ -73,7 +73,10 @@ if [ -z "${PAGE_ONLY:-}" ]; then
           $D --set "protocol.proposer=$GATED_TPE" --set modules.vigilance.params.mode=scheduled --out "$OUT/planar_explore/tpe_sched_dev"
           $D --set "protocol.proposer=$GATED_CMA" --out "$OUT/planar_explore/cma_gated_dev"
           $D --set "protocol.proposer=$GATED_TPE" --out "$OUT/planar_explore/tpe_gated_dev"
-          $D --set modules.vigilance.params.value=0 --out "$OUT/planar_explore/sfl_dev" ;;
+          $D --set modules.vigilance.params.value=0 --out "$OUT/planar_explore/sfl_dev"
+          # a failure scored by how far it got (failure_score: graded) instead of a flat 0, behind the same gates
+          $D --set 'protocol.proposer={kind: cma, gate: resample, failure_score: graded}' --out "$OUT/planar_explore/cma_graded_dev"
+          $D --set 'protocol.proposer={kind: tpe, gate: veto, failure_score: graded}' --out "$OUT/planar_explore/tpe_graded_dev" ;;
         humanoid/explore)  # the final gated CMA-ES and TPE at the vigilance of sfl's safest group (0), seeds 0-4
           study humanoid humanoid_explore/gated_cma_svig0 --set "protocol.proposer=$GATED_CMA" --set modules.vigilance.params.value=0
           study humanoid humanoid_explore/gated_tpe_svig0 --set "protocol.proposer=$GATED_TPE" --set modules.vigilance.params.value=0 ;;

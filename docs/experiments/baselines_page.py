@@ -708,7 +708,12 @@ Then (issue 33 item 2's third idea, 2026-11-28), on the same dev seeds 10-12: th
 thesis's (4.14) (`modules.vigilance.params.mode: scheduled`: s_vig drawn each trial in a band that falls from [0, 0.57]
 at the first trial to [-0.72, -0.15] at the 200th, cautious first, adventurous later) for gated CMA-ES and gated TPE,
 beside the same gated optimisers at the fixed s_vig 0 of the final groups and `sfl` at s_vig 0, all on those seeds
-(the last line below pairs each gated group with that `sfl` run). None was made a final group."""
+(the last line below pairs each gated group with that `sfl` run). And the issue's second idea, a failure scored by
+how far the trial got (`failure_score: graded`, `progress - 1` in [-1, 0]) instead of a flat 0, behind the same
+gates on the same seeds. Gated TPE asked exactly the points it asks with flat scores, decision for decision: TPE
+splits its trials into a good and a bad group by score, and behind the gate (about nine successes in ten) its good
+group holds successes only, so how failures rank among themselves does not reach its model. None was made a final
+group."""
 EXPLORE_HUMANOID = """The humanoid's gated groups above decide at its scenario's vigilance, -0.15, a
 risk-taking setting. Here the same gated CMA-ES (`resample`) and gated TPE (`veto`) decide at 0, the vigilance of
 the safest `sfl` group, on the final seeds 0-4 (issue 33 item 2, 2026-11-28, `docs/experiments/baselines.sh`'s
