@@ -117,6 +117,8 @@ def contact_rows(runs: Path, tag: str) -> list[str]:
             t10 = pitch.times[tilted][0] - t0 if t0 is not None and tilted.any() else np.inf
             walks.append((t["condition"], times, patterns, t0, t10, not t["m_fell"]))
     flat = [w for w in walks if w[0] == "flat" and w[5]]  # a band is measured on walks that did not fall
+    if not flat:
+        return ["no flat walk of these runs stayed up: no band to measure the contacts against"]
     lines = [f"| pattern | flat band | {' | '.join(NEW_SLOPE)} |", "|---|---|" + "---|" * len(NEW_SLOPE)]
     for name in ("heel only", "toe only", "one point"):
         band = max(float(p[name][times >= SETTLED].max()) for _, times, p, _, _, _ in flat)
