@@ -63,7 +63,7 @@ from ..telemetry import Rates, TelemetryTee
 from . import bus, ticklink
 from .bus import NoReply, RemoteError
 from .liveness import ProgressSlot, cpu_sample
-from .placement import pin
+from .placement import keep_nice_in_own_session, pin
 from .ticklink import (
     BusLink,
     SocketLink,
@@ -610,6 +610,7 @@ def serve(spec: dict, *, on_sigint: bool = False, stop_event: threading.Event | 
         format=f"%(asctime)s {spec['instance']} %(levelname)s %(message)s",
         stream=sys.stderr,
     )
+    keep_nice_in_own_session()  # a niced run stays niced against other sessions (autogroup)
     if spec.get("cpus"):
         pin(spec["cpus"])  # before the session's threads start: they inherit it
         log.info("pinned to cores %s", sorted(os.sched_getaffinity(0)))

@@ -244,6 +244,29 @@ class CoreWatch:
         return load
 
 
+def keep_nice_in_own_session() -> int | None:
+    """Carry this process's nice level to its session's scheduling group; returns the level written, or None.
+
+    Every module host is a session of its own (``setsid``: Ctrl-C reaches the supervisor only). Where the kernel
+    groups the CPU's shares by session (autogroup, on by default in many Linux distributions), a session competes with
+    the others at its group's nice, 0 when it is created, whatever its processes' own: ``nice -n 10 sfl run`` would
+    then starve nothing of the machine's other work. Raising one's own group's nice needs no privilege; lowering it
+    is never asked here. Only a session's leader does it (a module host started by the runtime), never a process in
+    someone else's session (``sfl worker`` in a terminal would nice the whole terminal). Nothing is done where there
+    is no autogroup (macOS, Windows, kernels without it)."""
+    if not hasattr(os, "getpriority") or os.getsid(0) != os.getpid():
+        return None
+    nice = os.getpriority(os.PRIO_PROCESS, 0)
+    if nice <= 0:
+        return None
+    try:
+        with open("/proc/self/autogroup", "w") as group:
+            group.write(str(min(nice, 19)))
+    except OSError:  # no autogroup, or the kernel refused: the process's own nice still holds within its group
+        return None
+    return min(nice, 19)
+
+
 def usable_cpus() -> list[int]:
     """The cores this process may run on (respects ``taskset`` and container limits); empty
     where the OS offers no CPU affinity (macOS, Windows), so that nothing is ever pinned there."""

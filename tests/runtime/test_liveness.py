@@ -14,6 +14,7 @@ import os
 import signal
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -142,6 +143,10 @@ def test_a_run_at_nice_10_beside_more_busy_processes_than_cores_gives_a_quiet_ru
     loops = []
     try:
         wait_for_trials(out, 1, proc)
+        body = module_process(proc, "body")
+        assert body.nice() == 10
+        if os.path.exists(f"/proc/{body.pid}/autogroup"):  # its session keeps the nice too (keep_nice_in_own_session)
+            assert Path(f"/proc/{body.pid}/autogroup").read_text().split()[-1] == "10"
         loops = busy_loops(8, cpu)
         wait_for_trials(out, 6, proc, timeout=300)
     finally:
