@@ -12,13 +12,14 @@
 #                                                              # humanoid (2026-11-28: 40 humanoid runs in 70 min)
 #   BODIES=planar SETS="sfl plain" bash docs/experiments/baselines.sh    # a part of it
 #   PAGE_ONLY=1 bash docs/experiments/baselines.sh             # the page from the runs there are
+#   BODIES=planar SETS=floor bash docs/experiments/baselines.sh  # the plain optimisers' own spread (about 3 min)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 OUT=${OUT:-runs/baselines}
 JOBS=${JOBS:-1}
 SEEDS=${SEEDS:-0,1,2,3,4}
 BODIES=${BODIES:-planar humanoid}
-SETS=${SETS:-sfl plain gated explore}
+SETS=${SETS:-sfl plain gated explore floor}
 
 # the gated optimisers (docs/proposers.md; issue 33 item 2, chosen on dev seeds 0, 1, 10, 11 of the planar walker:
 # CMA-ES resamples, a veto pushed its mean away from the efficient gaits near the failures; TPE vetoes, a resample
@@ -77,6 +78,13 @@ if [ -z "${PAGE_ONLY:-}" ]; then
           # a failure scored by how far it got (failure_score: graded) instead of a flat 0, behind the same gates
           $D --set 'protocol.proposer={kind: cma, gate: resample, failure_score: graded}' --out "$OUT/planar_explore/cma_graded_dev"
           $D --set 'protocol.proposer={kind: tpe, gate: veto, failure_score: graded}' --out "$OUT/planar_explore/tpe_graded_dev" ;;
+        planar/floor)  # the plain optimisers' own spread: CMA-ES and TPE on ten seeds each (the walker has no noise,
+          # so the runs are replicates); docs/experiments/replicate_floor.py writes docs/results/baselines_floor.md
+          for kind in cma tpe; do
+            sfl study scenarios/baselines_planar.yaml --jobs "$JOBS" --seeds 0,1,2,3,4,5,6,7,8,9 \
+              --set protocol.proposer.kind=$kind --out "$OUT/planar_floor/$kind"
+          done ;;
+        humanoid/floor) ;;  # not run on the humanoid: its trials start with noise, so its seeds are not replicates
         humanoid/explore)  # the final gated CMA-ES and TPE at the vigilance of sfl's safest group (0), seeds 0-4
           study humanoid humanoid_explore/gated_cma_svig0 --set "protocol.proposer=$GATED_CMA" --set modules.vigilance.params.value=0
           study humanoid humanoid_explore/gated_tpe_svig0 --set "protocol.proposer=$GATED_TPE" --set modules.vigilance.params.value=0 ;;
@@ -86,3 +94,6 @@ if [ -z "${PAGE_ONLY:-}" ]; then
   done
 fi
 python docs/experiments/baselines_page.py --runs "$OUT" --page docs/results/baselines.md --figures docs/results/baselines
+if [ -d "$OUT/planar_floor/cma" ] && [ -d "$OUT/planar_floor/tpe" ]; then
+  python docs/experiments/replicate_floor.py "$OUT/planar_floor/cma" "$OUT/planar_floor/tpe"
+fi
