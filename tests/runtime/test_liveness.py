@@ -145,9 +145,10 @@ def test_a_run_at_nice_10_beside_more_busy_processes_than_cores_gives_a_quiet_ru
     try:
         wait_for_trials(out, 1, proc)
         body = module_process(proc, "body")
-        assert body.nice() == 10
+        niced = min(os.nice(0) + 10, 19)  # nice -n 10 from wherever the tests run
+        assert body.nice() == niced
         if os.path.exists(f"/proc/{body.pid}/autogroup"):  # its session keeps the nice too (keep_nice_in_own_session)
-            assert Path(f"/proc/{body.pid}/autogroup").read_text().split()[-1] == "10"
+            assert Path(f"/proc/{body.pid}/autogroup").read_text().split()[-1] == str(niced)
         loops = busy_loops(2, cpu)
         wait_for_trials(out, 6, proc, timeout=300)
     finally:
