@@ -8,7 +8,7 @@ Each STUDY is a ``sfl study`` folder of one plain optimiser over ten seeds (docs
 noise: a trial's outcome is a function of its parameters, so two seeds of a plain optimiser differ only in the
 optimiser's own random draws, and the ten runs are replicates of one another.
 
-Per study: each seed's best eta (the largest eta of a successful trial) and, over every way of taking five of the ten
+Per study: each seed's best eta (the largest eta of a successful trial; a run with no success is left out) and, over every way of taking five of the ten
 runs as "the optimiser under test" and pairing them one to one with the five others as "the plain optimiser" (252 x
 120 = 30,240 pairings, all enumerated), the share in which every pair's ratio is >= 0.98: the chance that the plain
 optimiser itself, run again, meets the goal's every-seed bar. Also the share of single ordered pairs >= 0.98 and the
@@ -126,8 +126,9 @@ def main() -> None:
         "**What this says.** The goal's bar sits inside the plain optimiser's own spread: run again with other random "
         "draws, it falls short of 0.98x of itself in at least one of five seeds in the share of pairings the last "
         "column leaves out. A gated optimiser's every-seed ratio has to be read against that: a ratio under 0.98 in "
-        "one seed is no evidence of a loss when the plain optimiser's replicates show the same, and a ratio below "
-        "the smallest of the replicates' is.",
+        "one seed is no evidence of a loss when the plain optimiser's replicates show the same; a ratio below "
+        "the smallest of the replicates' is at least outside what ten replicates showed. The shares are estimates "
+        "from ten runs, whose pairings overlap heavily.",
         "",
     ]
     args.page.write_text("\n".join(lines))

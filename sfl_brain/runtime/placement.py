@@ -38,7 +38,9 @@ runs on cores of their own.
 
 from __future__ import annotations
 
+import errno
 import os
+import random
 import time
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
@@ -259,12 +261,18 @@ def keep_nice_in_own_session() -> int | None:
     nice = os.getpriority(os.PRIO_PROCESS, 0)
     if nice <= 0:
         return None
-    try:
-        with open("/proc/self/autogroup", "w") as group:
-            group.write(str(min(nice, 19)))
-    except OSError:  # no autogroup, or the kernel refused: the process's own nice still holds within its group
-        return None
-    return min(nice, 19)
+    # without CAP_SYS_ADMIN the kernel takes one such write per 100 ms, machine-wide (EAGAIN): the run's hosts start
+    # together, so each tries again for up to 3 s
+    deadline = time.monotonic() + 3.0
+    while True:
+        try:
+            with open("/proc/self/autogroup", "w") as group:
+                group.write(str(min(nice, 19)))
+            return min(nice, 19)
+        except OSError as error:  # no autogroup, or refused: the process's own nice still holds within its group
+            if error.errno != errno.EAGAIN or time.monotonic() > deadline:
+                return None
+            time.sleep(0.11 + 0.05 * random.random())
 
 
 def usable_cpus() -> list[int]:

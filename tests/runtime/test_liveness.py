@@ -140,7 +140,7 @@ def test_a_run_at_nice_10_beside_more_busy_processes_than_cores_gives_a_quiet_ru
         if cpu is not None:
             os.sched_setaffinity(0, {cpu})
 
-    proc = start_sfl_run(WALKER, out, *sets, preexec_fn=nice_on_one_core)
+    proc = start_sfl_run(WALKER, out, *sets, preexec_fn=nice_on_one_core, start_new_session=True)
     loops = []
     try:
         wait_for_trials(out, 1, proc)
@@ -151,6 +151,9 @@ def test_a_run_at_nice_10_beside_more_busy_processes_than_cores_gives_a_quiet_ru
             assert Path(f"/proc/{body.pid}/autogroup").read_text().split()[-1] == str(niced)
         loops = busy_loops(2, cpu)
         wait_for_trials(out, 6, proc, timeout=300)
+    except BaseException:  # a failed check: the run's whole process group goes too, not only the loops
+        os.killpg(proc.pid, signal.SIGKILL)
+        raise
     finally:
         for loop in loops:  # the run's own end (merging its recording) needs no load
             loop.kill()
