@@ -19,9 +19,7 @@ from __future__ import annotations
 
 import argparse
 import itertools
-import json
-import subprocess
-from datetime import datetime, timezone
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -29,16 +27,19 @@ import pyarrow.parquet as pq
 import yaml
 
 ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))
+from sfl_brain.recording.records import run_status  # noqa: E402
+from sfl_brain.report.report import made_by  # noqa: E402
+
 BAR = 0.98  # issue 33: best eta >= 0.98x the plain optimiser's in every seed
 PAIRS = 5  # the goal's five seeds
 
 
 def best_etas(study: Path) -> dict[int, float]:
-    """Seed -> best eta of the study's completed runs (runs with no success are left out, and named)."""
+    """Seed -> best eta of the study's completed runs (a run with no success is left out)."""
     out = {}
     for run in sorted(study.glob("run_seed*")):
-        summary = run / "summary.json"
-        if not summary.exists() or json.loads(summary.read_text())["status"] != "completed":
+        if run_status(run)[0] != "completed":
             continue
         rows = pq.read_table(run / "trials.parquet", columns=["success", "quality"]).to_pylist()
         etas = [r["quality"] for r in rows if r["success"]]
@@ -79,15 +80,6 @@ def proposer_of(study: Path) -> str:
     return scenario["protocol"]["proposer"]["kind"]
 
 
-def commit() -> str:
-    try:
-        return subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True, check=True
-        ).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("studies", nargs="+", type=Path)
@@ -96,8 +88,8 @@ def main() -> None:
     lines = [
         "# Two runs of the same plain optimiser: how far their best gaits differ",
         "",
-        f"Written by `python docs/experiments/replicate_floor.py {' '.join(str(s) for s in args.studies)}` at "
-        f"`{commit()}`, {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC, from the studies of "
+        f"Written by `python docs/experiments/replicate_floor.py {' '.join(str(s) for s in args.studies)}`. "
+        f"{made_by(sorted(run for study in args.studies for run in study.glob('run_seed*')))} From the studies of "
         "`docs/experiments/baselines.sh`'s `planar/floor` set (each plain optimiser on seeds 0-9 of "
         "`scenarios/baselines_planar.yaml`, 200 trials). The planar reflex walker has no noise, so the ten runs of one "
         "optimiser differ only in its own random draws: they are replicates. Issue 33 asks a gated optimiser for a "

@@ -258,8 +258,8 @@ def keep_nice_in_own_session() -> int | None:
     is no autogroup (macOS, Windows, kernels without it)."""
     if not hasattr(os, "getpriority") or os.getsid(0) != os.getpid():
         return None
-    nice = os.getpriority(os.PRIO_PROCESS, 0)
-    if nice <= 0:
+    level = min(os.getpriority(os.PRIO_PROCESS, 0), 19)
+    if level <= 0:
         return None
     # without CAP_SYS_ADMIN the kernel takes one such write per 100 ms, machine-wide (EAGAIN): the run's hosts start
     # together, so each tries again for up to 3 s
@@ -267,8 +267,8 @@ def keep_nice_in_own_session() -> int | None:
     while True:
         try:
             with open("/proc/self/autogroup", "w") as group:
-                group.write(str(min(nice, 19)))
-            return min(nice, 19)
+                group.write(str(level))
+            return level
         except OSError as error:  # no autogroup, or refused: the process's own nice still holds within its group
             if error.errno != errno.EAGAIN or time.monotonic() > deadline:
                 return None

@@ -133,7 +133,7 @@ def test_a_run_at_nice_10_beside_more_busy_processes_than_cores_gives_a_quiet_ru
         "timeouts.tick=0.15",
         "timeouts.request=0.4",
     ]
-    cpu = usable_cpus()[-1] if usable_cpus() else None
+    cpu = next(reversed(usable_cpus()), None)
 
     def nice_on_one_core():
         os.nice(10)
