@@ -337,6 +337,9 @@ class ControllerHung(LinkError):
 #: how long a body waits for its controller's reset reply when it can watch the controller's process: as long as
 #: the controller lives and is not hung (its watchdog decides); the query itself only ends with the process
 WATCHED_WAIT = 24 * 3600.0
+#: s: how long a reset query that ends unanswered at once (no controller's queryable matched yet) is asked again
+#: before the controller counts as gone; a restarted controller's queryable reaches the body's session within it
+RESET_DISCOVERY = 2.0
 
 
 class SpinThenSleep:
@@ -539,15 +542,18 @@ class TickLink:
                 if text is not None:  # not Zenoh's own "Timeout", nor a stranger's
                     replies.put((False, text))
 
+        def ask() -> None:
+            self.session.get(
+                self.reset_key,
+                zenoh.handlers.Callback(on_reply, lambda: replies.put(None), indirect=False),
+                payload=payload,
+                timeout=wait,
+                target=zenoh.QueryTarget.ALL,
+                consolidation=zenoh.ConsolidationMode.NONE,  # every reply as it comes: a stranger's cannot hold ours
+            )
+
         sent = time.monotonic()
-        self.session.get(
-            self.reset_key,
-            zenoh.handlers.Callback(on_reply, lambda: replies.put(None), indirect=False),
-            payload=payload,
-            timeout=wait,
-            target=zenoh.QueryTarget.ALL,
-            consolidation=zenoh.ConsolidationMode.NONE,  # every reply as it comes: a stranger's cannot hold ours
-        )
+        ask()
         while True:
             try:
                 answer = replies.get(timeout=0.05)
@@ -557,6 +563,12 @@ class TickLink:
                 continue
             if answer is None:
                 waited = time.monotonic() - sent
+                if waited < min(wait, RESET_DISCOVERY):
+                    # ended at once with no answer: no queryable matched yet. A restarted controller's link can be up
+                    # before its reset queryable reaches this session; nobody got the reset, so it is asked again
+                    time.sleep(0.02)
+                    ask()
+                    continue
                 raise LinkError(
                     f"controller reset for trial {msg.trial_id}: no reply from {self.reset_key} after {waited:.2f} s"
                 )
