@@ -24,7 +24,7 @@ from sfl_brain.runtime.liveness import CpuSample, NoProgressClock, cpu_sample, h
 from sfl_brain.runtime.placement import usable_cpus
 from sfl_brain.scenario import load
 
-from ..conftest import SCENARIOS, Lines, poll_until, start_sfl_run, wait_for_trials
+from ..conftest import SCENARIOS, Lines, poll_until, start_sfl_run, trials_recorded, wait_for_trials
 from .test_faults import module_process
 
 WALKER = SCENARIOS / "quickstart.yaml"
@@ -103,16 +103,22 @@ def test_a_controller_stopped_mid_trial_longer_than_its_tick_time_out_resumes_th
     assert stable(rows) == stable(run_local(load(WALKER, sets)))
 
 
+#: a busy loop ends by itself after this many seconds, should the test that started it be killed before it kills them
+LOOP_DEADLINE = 600
+
+
 def busy_loops(count: int, cpu: int | None = None) -> list[subprocess.Popen]:
-    """``count`` processes that spin, at nice 0, on the cores this test may use (on core ``cpu`` only, if given).
-    Each is a session of its own: where the kernel groups the scheduler's shares by session (autogroup, on by default
-    in many distributions), a session's processes share one slice, and each module of a run is a session of its own
-    (``setsid``), so loops in the test's own session would take one slice between them and starve nothing."""
+    """``count`` processes that spin, at nice 0, on the cores this test may use (on core ``cpu`` only, if given),
+    each for LOOP_DEADLINE s at most. Each is a session of its own: where the kernel groups the scheduler's shares by
+    session (autogroup, on by default in many distributions), a session's processes share one slice, and each module
+    of a run is a session of its own (``setsid``), so loops in the test's own session would take one slice between
+    them and starve nothing."""
     pin = None if cpu is None else (lambda: os.sched_setaffinity(0, {cpu}))
+    spin = f"import time\nend = time.monotonic() + {LOOP_DEADLINE}\nwhile time.monotonic() < end: pass"
     return [
-        subprocess.Popen([sys.executable, "-c", "while True: pass"], start_new_session=True, preexec_fn=pin)
-        for _ in range(count)
+        subprocess.Popen([sys.executable, "-c", spin], start_new_session=True, preexec_fn=pin) for _ in range(count)
     ]
+
 
 
 def test_a_run_at_nice_10_beside_more_busy_processes_than_cores_gives_a_quiet_runs_records(tmp_path):
@@ -122,11 +128,11 @@ def test_a_run_at_nice_10_beside_more_busy_processes_than_cores_gives_a_quiet_ru
     session of its own. With the kernel's autogroup on, a session competes at its group's nice: the run's modules
     carry their nice 10 to their sessions' groups (checked here), so the run gets about a twentieth of the core (nice
     10 against two at 0, as without autogroup). Before that, every session got an equal slice whatever its nice, and
-    three loops on two cores slowed a 3-s trial only from 31 ms quiet to 34-87 ms. The trial in flight when the loops
-    start is not counted."""
+    three loops on two cores slowed a 3-s trial only from 31 ms quiet to 34-87 ms. Only the trials that start after the
+    loops spin are counted (a quiet trial takes about 30 ms, so several may end while the loops start), at least 3."""
     out = tmp_path / "run"
     sets = [
-        "protocol.trials=6",
+        "protocol.trials=10",
         "modules.body.params.duration=3",
         "record.body_every=0",
         "timeouts.trial=0.15",
@@ -150,7 +156,9 @@ def test_a_run_at_nice_10_beside_more_busy_processes_than_cores_gives_a_quiet_ru
         if os.path.exists(f"/proc/{body.pid}/autogroup"):  # its session keeps the nice too (keep_nice_in_own_session)
             assert Path(f"/proc/{body.pid}/autogroup").read_text().split()[-1] == str(niced)
         loops = busy_loops(2, cpu)
-        wait_for_trials(out, 6, proc, timeout=300)
+        poll_until(lambda: all(cpu_sample(loop.pid).cpu > 0.05 for loop in loops), "the loops to spin", 30)
+        spinning_at = trials_recorded(out)  # trials up to this one (in flight, or next) may have started before
+        wait_for_trials(out, 10, proc, timeout=300)
     except BaseException:  # a failed check: the run's whole process group goes too, not only the loops
         os.killpg(proc.pid, signal.SIGKILL)
         raise
@@ -162,7 +170,8 @@ def test_a_run_at_nice_10_beside_more_busy_processes_than_cores_gives_a_quiet_ru
     assert proc.returncode == 0, stderr
     rows = read_records(out)
     assert stable(rows) == stable(run_local(load(WALKER, sets)))
-    loaded = [r["wall_ms"] for r in rows if r["kind"] == "trial"][2:]
+    loaded = [r["wall_ms"] for r in rows if r["kind"] == "trial"][spinning_at + 1 :]
+    assert len(loaded) >= 3, f"only {len(loaded)} trials started after the loops spun ({spinning_at} before)"
     assert min(loaded) > 150, f"the loops did not slow every trial past timeouts.trial: {loaded}"
 
 
