@@ -10,6 +10,9 @@ the load average is printed before, during and after:
 
 (a)  physics only: the body's ``actuate`` with the standing command 1000 times on a freshly started trial (the servo
      law every physics step, the energy sum, judging; no sensing, no controller), as benchmarks/humanoid.py (a);
+(a-walk) physics only while walking: (a) with the gait's own commands, the 1000 commands the CPG (b) sent in one
+     trial on that engine, replayed in order, open loop (no sensing, no controller). Walking contacts cost an
+     engine differently from standing ones, so this, not (a), is the physics a walking trial pays;
 (a') the body's whole trial with a constant controller (the standing pose): (a) plus sensing (joints, IMU, the eight
      foot pressure sensors from the contacts) and the framework's tick;
 (b)  the default gait: ``CPGController`` with the ``humanoid_nao`` circuit in the body's process (``InProcessLink``):
@@ -44,7 +47,12 @@ from sfl_brain.modules.controllers.cpg import CPGController, CPGParams  # noqa: 
 SECONDS = 10.0  # simulated time of a trial: the gait reaches the 1.5-m line at about 13.6 s, so every trial lasts it
 
 ENGINES = ("pybullet", "mujoco")
-ITEMS = {"a": "physics only, standing command", "a1": "body trial, constant controller", "b": "CPG + body"}
+ITEMS = {
+    "a": "physics only, standing command",
+    "a-walk": "physics only, the gait's commands",
+    "a1": "body trial, constant controller",
+    "b": "CPG + body",
+}
 NUMBA = importlib.util.find_spec("numba") is not None
 if NUMBA:
     ITEMS["b-numba"] = "CPG (compiled kernel) + body"
@@ -67,6 +75,35 @@ def physics_only(body: Humanoid) -> tuple[float, float]:
     return time.perf_counter() - wall, time.process_time() - cpu
 
 
+def gait_commands(physics: str) -> list[np.ndarray]:
+    """The commands the default gait's CPG sends in one trial on ``physics``, in order (for (a-walk))."""
+    body = new_body(physics, CPGController(CPGParams(circuit="humanoid_nao")))
+    sent, actuate = [], body.actuate
+
+    def keep(command: np.ndarray) -> None:
+        sent.append(np.array(command, dtype=float))
+        actuate(command)
+
+    body.actuate = keep
+    try:
+        whole_trial(body)
+    finally:
+        body.close()
+    return sent
+
+
+def replayed(body: Humanoid, commands: list[np.ndarray]) -> tuple[float, float]:
+    """(a-walk): wall and CPU seconds of ``actuate`` with ``commands`` in order, on a freshly started trial; the
+    replayed gait must not fall (it walks open loop on the same start)."""
+    body.start_trial(REQUEST)
+    wall, cpu = time.perf_counter(), time.process_time()
+    for command in commands:
+        body.actuate(command)
+    wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+    assert not body.fell, "the replayed gait fell: (a-walk) would time a fall, not a walk"
+    return wall, cpu
+
+
 def whole_trial(body: Humanoid) -> tuple[float, float]:
     """(a') or (b): wall and CPU seconds of the body's trial with its link's controller; it must last the full 10 s."""
     wall, cpu = time.perf_counter(), time.process_time()
@@ -83,9 +120,11 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     args = parser.parse_args(argv)
     repeats = 1 if args.quick else args.repeats
     print(f"before: {machine_load()}", flush=True)
-    bodies = {}
+    bodies, commands = {}, {}
     for engine in ENGINES:
+        commands[engine] = gait_commands(engine)
         bodies["a", engine] = new_body(engine)
+        bodies["a-walk", engine] = new_body(engine)
         bodies["a1", engine] = new_body(engine, Standing())
         bodies["b", engine] = new_body(engine, CPGController(CPGParams(circuit="humanoid_nao")))
         if NUMBA:
@@ -93,13 +132,22 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     wall: dict[tuple, list[float]] = {key: [] for key in bodies}
     cpu: dict[tuple, list[float]] = {key: [] for key in bodies}
     try:
-        for (item, _), body in bodies.items():  # warm-up: worlds built, caches filled
-            physics_only(body) if item == "a" else whole_trial(body)
+
+        def timed(key: tuple) -> tuple[float, float]:
+            item, engine = key
+            if item == "a":
+                return physics_only(bodies[key])
+            if item == "a-walk":
+                return replayed(bodies[key], commands[engine])
+            return whole_trial(bodies[key])
+
+        for key in bodies:  # warm-up: worlds built, caches filled
+            timed(key)
         order, shuffle = list(bodies), np.random.default_rng(0).shuffle
         for _ in range(repeats):  # interleaved in a shuffled order, so that all see the same machine load
             shuffle(order)
             for key in order:
-                w, c = physics_only(bodies[key]) if key[0] == "a" else whole_trial(bodies[key])
+                w, c = timed(key)
                 wall[key].append(w)
                 cpu[key].append(c)
         during = machine_load()
@@ -124,11 +172,17 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
         goal = "; goal >= 3x" if item.startswith("b") else ""
         name = "(a')" if item == "a1" else f"({item})"
         print(
-            f"  {name:9s} {label:32s} PyBullet {pb * 1e3:7.1f} ms ({SECONDS / pb:5.1f}x real time), "
+            f"  {name:9s} {label:34s} PyBullet {pb * 1e3:7.1f} ms ({SECONDS / pb:5.1f}x real time), "
             f"MuJoCo {mj * 1e3:7.1f} ms ({SECONDS / mj:5.1f}x); wall {ratio(wall, item):.2f}x, CPU "
             f"{ratio(cpu, item):.2f}x ({pb_cpu * 1e3:.0f} / {mj_cpu * 1e3:.0f} ms){goal}"
         )
         out[item] = ratio(wall, item)
+    walking = {engine: float(np.median(cpu["a-walk", engine])) for engine in ENGINES}
+    print(
+        f"  what bounds the goal: the walking physics alone, (a-walk), is {out['a-walk']:.2f}x on wall time; a trial "
+        f"costs that plus what both engines pay alike (the CPG, sensing, the tick): (b) - (a-walk) = "
+        + ", ".join(f"{e} {(float(np.median(cpu['b', e])) - walking[e]) * 1e3:.0f} ms CPU" for e in ENGINES)
+    )
     print(f"after: {machine_load()}")
     return out
 

@@ -81,11 +81,13 @@ def test_humanoid_benchmark_prints_the_trial_over_processes_against_one_process(
 
 def test_engines_benchmark_prints_pybullet_against_mujoco():
     out = bench("engines.py", "--quick")
-    items = 4 if importlib.util.find_spec("numba") is not None else 3  # (b-numba): the compiled CPG on both engines
+    items = 5 if importlib.util.find_spec("numba") is not None else 4  # (b-numba): the compiled CPG on both engines
     figures(out, r"PyBullet +[\d.]+ ms \( *([\d.]+)x real time\)", items)
     figures(out, r"wall ([\d.]+)x, CPU", items)
     figures(out, r"CPU ([\d.]+)x \(", items)
-    assert ("(b-numba)" in out) == (items == 4)
+    assert ("(b-numba)" in out) == (items == 5)
+    figures(out, r"the walking physics alone, \(a-walk\), is ([\d.]+)x")
+    figures(out, r"\(b\) - \(a-walk\) = pybullet (-?[\d.]+) ms CPU, mujoco -?[\d.]+ ms CPU")
 
 
 def test_brain_benchmark_prints_the_cycle_per_trial():
