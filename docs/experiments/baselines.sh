@@ -27,6 +27,10 @@ SETS=${SETS:-sfl plain gated explore floor}
 # with restarts from novel gate-approved draws when its step size falls below the distinctness of two gaits (0.1)
 GATED_CMA='{kind: cma, gate: resample}'
 GATED_CMA_RESTARTS='{kind: cma, gate: resample, restart_below: 0.1, restart_from: novel}'
+# and CMA-ES behind a gate whose vigilance follows the thesis's schedule (4.14), cautious first and adventurous later:
+# chosen on dev seeds 10-12 of the planar walker (2026-11-28), the only gated variant there that kept its best eta
+# >= 0.98x plain CMA-ES's in every dev seed and reached 10 good gaits in all three; made a final group on 2026-11-29
+# before it ran on seeds 0-4
 GATED_TPE='{kind: tpe, gate: veto}'
 GATED_SAFE_BO='{kind: safe_bo, gate: veto}'
 
@@ -52,6 +56,7 @@ if [ -z "${PAGE_ONLY:-}" ]; then
         */gated)
           study "$body" gated_cma --set "protocol.proposer=$GATED_CMA"
           study "$body" gated_cma_restarts --set "protocol.proposer=$GATED_CMA_RESTARTS"
+          study "$body" gated_cma_sched --set "protocol.proposer=$GATED_CMA" --set modules.vigilance.params.mode=scheduled
           study "$body" gated_tpe --set "protocol.proposer=$GATED_TPE"
           study "$body" gated_safe_bo --set "protocol.proposer=$GATED_SAFE_BO" ;;
         planar/explore)  # what was tried to keep the gated optimisers exploring, on dev seeds (issue 33 item 2)
