@@ -38,7 +38,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _floor import machine_load  # noqa: E402
-from humanoid import REQUEST, STANDING_COMMAND, Standing  # noqa: E402
+from humanoid import REQUEST, STANDING_COMMAND, Standing, gait_commands, replayed  # noqa: E402
 
 from sfl_brain.bodies.humanoid import Humanoid  # noqa: E402
 from sfl_brain.body import InProcessLink  # noqa: E402
@@ -75,35 +75,6 @@ def physics_only(body: Humanoid) -> tuple[float, float]:
     return time.perf_counter() - wall, time.process_time() - cpu
 
 
-def gait_commands(physics: str) -> list[np.ndarray]:
-    """The commands the default gait's CPG sends in one trial on ``physics``, in order (for (a-walk))."""
-    body = new_body(physics, CPGController(CPGParams(circuit="humanoid_nao")))
-    sent, actuate = [], body.actuate
-
-    def keep(command: np.ndarray) -> None:
-        sent.append(np.array(command, dtype=float))
-        actuate(command)
-
-    body.actuate = keep
-    try:
-        whole_trial(body)
-    finally:
-        body.close()
-    return sent
-
-
-def replayed(body: Humanoid, commands: list[np.ndarray]) -> tuple[float, float]:
-    """(a-walk): wall and CPU seconds of ``actuate`` with ``commands`` in order, on a freshly started trial; the
-    replayed gait must not fall (it walks open loop on the same start)."""
-    body.start_trial(REQUEST)
-    wall, cpu = time.perf_counter(), time.process_time()
-    for command in commands:
-        body.actuate(command)
-    wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
-    assert not body.fell, "the replayed gait fell: (a-walk) would time a fall, not a walk"
-    return wall, cpu
-
-
 def whole_trial(body: Humanoid) -> tuple[float, float]:
     """(a') or (b): wall and CPU seconds of the body's trial with its link's controller; it must last the full 10 s."""
     wall, cpu = time.perf_counter(), time.process_time()
@@ -122,7 +93,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     print(f"before: {machine_load()}", flush=True)
     bodies, commands = {}, {}
     for engine in ENGINES:
-        commands[engine] = gait_commands(engine)
+        commands[engine] = gait_commands(new_body(engine, CPGController(CPGParams(circuit="humanoid_nao"))))
         bodies["a", engine] = new_body(engine)
         bodies["a-walk", engine] = new_body(engine)
         bodies["a1", engine] = new_body(engine, Standing())

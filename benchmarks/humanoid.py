@@ -11,6 +11,9 @@ real-time factor (simulated s per CPU s); the load average before, during and af
 
 (a) physics only: the body built for the trial, then ``actuate`` with the standing command 1000 times (no sensing, no
     controller, no messages), as ``benchmarks/planar.py`` (a) steps the planar biped;
+(a-walk) physics only while walking: (a) with the commands the CPG of (b) sent in one trial, replayed in order, open
+    loop (benchmarks/engines.py (a-walk)): walking contacts cost PyBullet less than standing ones, so this, not (a),
+    is the physics a walking trial pays, the floor under (b) and (b-numba);
 (a') the body's whole trial with a constant controller in its process (the standing pose): (a) plus sensing (the
     foot pressure sensors read PyBullet's contact points), judging and the framework's tick (messages, checks);
 (b) the default gait: ``CPGController`` with the ``humanoid_nao`` circuit in the body's process (``InProcessLink``),
@@ -106,6 +109,35 @@ def physics_only(body: Humanoid) -> float:
     return time.perf_counter() - t
 
 
+def gait_commands(body: Humanoid) -> list[np.ndarray]:
+    """The commands the controller on ``body``'s link sends in one whole trial, in order (for (a-walk)); closes
+    ``body``."""
+    sent, actuate = [], body.actuate
+
+    def keep(command: np.ndarray) -> None:
+        sent.append(np.array(command, dtype=float))
+        actuate(command)
+
+    body.actuate = keep
+    try:
+        body.handle(REQUEST)
+    finally:
+        body.close()
+    return sent
+
+
+def replayed(body: Humanoid, commands: list[np.ndarray]) -> tuple[float, float]:
+    """(a-walk): wall and CPU seconds of ``actuate`` with ``commands`` in order, on a freshly started trial; the
+    replayed gait must not fall (it walks open loop from the same start)."""
+    body.start_trial(REQUEST)
+    wall, cpu = time.perf_counter(), time.process_time()
+    for command in commands:
+        body.actuate(command)
+    wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+    assert not body.fell, "the replayed gait fell: (a-walk) would time a fall, not a walk"
+    return wall, cpu
+
+
 def whole_trial(body: Humanoid) -> tuple[float, dict]:
     """(a') or (b): the body's trial with the controller of its link; the trial must last the full SECONDS."""
     t = time.perf_counter()
@@ -161,6 +193,10 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     session = bus.open_session([endpoint], [])
     folder = tempfile.mkdtemp(prefix="sfl-")
     physics_body = new_body()
+    walking_body = new_body()
+    recorder = new_body()
+    recorder.link = InProcessLink(CPGController(CPGParams(**CONTROLLER_PARAMS)))
+    commands = gait_commands(recorder)
     standing_body = new_body()
     standing_body.link = InProcessLink(Standing())
     cpg_body = new_body()
@@ -192,7 +228,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
         if numba_body is not None:
             whole_trial(numba_body)  # numba compiles or loads its cache
         core = pairs["c"].placement.of("body")  # the one-process trials run on the pair's core
-        order, shuffle = ["a", "a1", "b", *pairs], np.random.default_rng(0).shuffle
+        order, shuffle = ["a", "a-walk", "a1", "b", *pairs], np.random.default_rng(0).shuffle
         if numba_body is not None:
             order.append("b-numba")
         for _ in range(repeats):  # interleaved in a shuffled order, so that all see the same machine load
@@ -208,6 +244,8 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
                         used = time.process_time()
                         if name == "a":
                             t = physics_only(physics_body)
+                        elif name == "a-walk":
+                            t = replayed(walking_body, commands)[0]
                         else:
                             body = {"a1": standing_body, "b": cpg_body, "b-numba": numba_body}[name]
                             t = whole_trial(body)[0]
@@ -220,7 +258,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
             pair.close()
         session.close()
         shutil.rmtree(folder, ignore_errors=True)
-        for body in (physics_body, standing_body, cpg_body, numba_body):
+        for body in (physics_body, walking_body, standing_body, cpg_body, numba_body):
             if body is not None:
                 body.close()
     m = {name: float(np.median(v)) for name, v in times.items()}
@@ -248,6 +286,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     )
     print(f"  (c) placed by lockstep.pin_cpus {args.pin}: {pairs_where(args.pin)}; during: {during}")
     print(f"  (a)  physics only, standing command      {rt('a')}")
+    print(f"  (a-walk) physics only, the gait's commands {rt('a-walk')}")
     print(f"  (a') body trial, constant controller     {rt('a1')}")
     print(f"  (b)  CPG + body, one process             {rt('b')}  goal >= 20x real time")
     if "b-numba" in m:
@@ -255,6 +294,11 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
             f"  (b-numba) (b), compiled CPG kernel      {rt('b-numba')}; (b)/(b-numba) = {ratio('b', 'b-numba'):.2f}x "
             "the one-process speed (issue 31's goal >= 1.4)"
         )
+    floor = m["a-walk"] + a1 - a  # walking physics, sensing and the tick: what no controller can take away
+    print(
+        f"  the floor under a one-process trial: walking physics + sensing and tick (a-walk) + (a') - (a) = "
+        f"{floor * 1e3:.1f} ms; (b) / floor = {b / floor:.2f}x, the most any controller could gain (issue 31: 1.4)"
+    )
     print(f"  (c)  CPG + body over processes           {rt('c')}  goal >= 20x real time")
     print(f"  (b)/(c) = {ratio('b', 'c'):.2f} of the one-process speed over processes (goal >= 0.8)")
     print(

@@ -76,6 +76,8 @@ def test_humanoid_benchmark_prints_the_trial_over_processes_against_one_process(
     figures(out, r"\(c\)  CPG \+ body over processes +[\d.]+ ms  \( *([\d.]+)x real time")
     figures(out, r"\(c\)  CPG \+ body over processes +[\d.]+ ms  \( *[\d.]+x real time; CPU +[\d.]+ ms, +([\d.]+)x\)")
     figures(out, r"CPU over processes / one process: \(c\)/\(b\) = ([\d.]+)")
+    figures(out, r"\(a-walk\) physics only, the gait's commands +[\d.]+ ms  \( *([\d.]+)x real time")
+    figures(out, r"\(b\) / floor = ([\d.]+)x, the most any controller could gain")
     assert "one 5-s trial (500 control ticks, 2000 physics steps)" in out
 
 
