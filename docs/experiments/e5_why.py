@@ -14,6 +14,9 @@
    the largest value any flat walk of the same runs that did not fall shows after its start ramp (5 s on) is that
    pattern's band, and a pattern "fires" when it first exceeds it after the touch. Per case: walks where it fires,
    the median latency, and how many fire within 0.5 s of the touch and before the torso passes 10 deg.
+4. **The weight shared between the feet** (the next candidate: a foot over a convex edge takes its share of the
+   weight late, so the feet go longer without sharing it): per walk, the time since both feet last carried at least
+   a share ``x`` of their summed pressure (heel + toe of each), for x in ``SHARES``; its band and firing as in 3.
 
     python docs/experiments/e5_why.py runs/chapter5
 """
@@ -37,6 +40,7 @@ CONTACT_WINDOW = 0.33  # s, half a gait cycle (0.667 s): a foot's stance
 PRESSED = 0.5  # a heel or toe sensor at or above this presses (the adaptation's lying-flat test, circuit file)
 SETTLED = 5.0  # s: a walk's contacts count toward the band from here (after the 4-s start ramp)
 FEET = ["body/feet/heel_l", "body/feet/toe_l", "body/feet/heel_r", "body/feet/toe_r"]
+SHARES = (0.1, 0.2, 0.3, 0.4)  # the lighter foot's share of the feet's summed pressure that counts as sharing
 
 
 def table(path: Path) -> list[dict]:
@@ -97,7 +101,45 @@ def contact_patterns(heel_l, toe_l, heel_r, toe_r, n: int) -> dict[str, np.ndarr
     }
 
 
-def contact_rows(runs: Path, tag: str) -> list[str]:
+def since_shared(times: np.ndarray, heel_l, toe_l, heel_r, toe_r, share: float) -> np.ndarray:
+    """Each tick's time (s) since both feet last carried at least ``share`` of the feet's summed pressure."""
+    left, right = np.asarray(heel_l) + np.asarray(toe_l), np.asarray(heel_r) + np.asarray(toe_r)
+    total = left + right
+    shared = (np.minimum(left, right) >= share * total) & (total > 0)
+    last = np.maximum.accumulate(np.where(shared, times, times[0]))
+    return times - last
+
+
+def fire_table(walks: list[tuple], signals: dict[str, list[np.ndarray]]) -> list[str]:
+    """Per signal (one array per walk): its band, the most any flat walk that did not fall shows from SETTLED s on,
+    and per case the walks where it exceeds the band after the touch, the median latency, and how many within 0.5 s
+    and before the torso passed TORSO_DEG."""
+    flat = [i for i, w in enumerate(walks) if w[0] == "flat" and w[5]]  # a band is measured on walks that did not fall
+    if not flat:
+        return ["no flat walk of these runs stayed up: no band to measure against"]
+    lines = [f"| signal | flat band | {' | '.join(NEW_SLOPE)} |", "|---|---|" + "---|" * len(NEW_SLOPE)]
+    for name, values in signals.items():
+        band = max(float(values[i][walks[i][1] >= SETTLED].max()) for i in flat)
+        cells = []
+        for case in NEW_SLOPE:
+            latency, t10 = [], []
+            for (c, times, _, t0, tilt, _), v in zip(walks, values, strict=True):
+                if c == case and t0 is not None:
+                    above = (times >= t0) & (v > band)
+                    latency.append(times[above][0] - t0 if above.any() else np.inf)
+                    t10.append(tilt)
+            latency, t10 = np.array(latency), np.array(t10)
+            fired = np.isfinite(latency)
+            early = int(((latency <= 0.5) & (latency < t10)).sum())
+            when = f"{median(latency[fired]):.2f} s" if fired.any() else "-"
+            cells.append(f"{fired.sum()}/{len(latency)}, {when}, {early} early")
+        lines.append(f"| {name} | {band:.2f} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def feet_walks(runs: Path, tag: str) -> list[tuple]:
+    """Per walk of ``detectors{tag}_s0..2``: (case, times, the four feet signals, touch time or None, time from the
+    touch until the torso passed TORSO_DEG, stayed up)."""
     walks = []
     for seed in range(3):
         run = runs / f"detectors{tag}_s{seed}"
@@ -108,35 +150,26 @@ def contact_rows(runs: Path, tag: str) -> list[str]:
             trial = int(t["trial"])
             if trial not in series[FEET[0]]:
                 continue
-            times = series[FEET[0]][trial].times
-            n = max(1, int(round(CONTACT_WINDOW / float(np.median(np.diff(times))))))
-            patterns = contact_patterns(*(series[f][trial].values for f in FEET), n)
             t0 = touched[trial].times[0] if trial in touched else None
             pitch = series["body/torso/pitch"][trial]
             tilted = (pitch.times >= (t0 or 0.0)) & (np.abs(pitch.values) > TORSO_DEG)
             t10 = pitch.times[tilted][0] - t0 if t0 is not None and tilted.any() else np.inf
-            walks.append((t["condition"], times, patterns, t0, t10, not t["m_fell"]))
-    flat = [w for w in walks if w[0] == "flat" and w[5]]  # a band is measured on walks that did not fall
-    if not flat:
-        return ["no flat walk of these runs stayed up: no band to measure the contacts against"]
-    lines = [f"| pattern | flat band | {' | '.join(NEW_SLOPE)} |", "|---|---|" + "---|" * len(NEW_SLOPE)]
-    for name in ("heel only", "toe only", "one point"):
-        band = max(float(p[name][times >= SETTLED].max()) for _, times, p, _, _, _ in flat)
-        cells = []
-        for case in NEW_SLOPE:
-            latency, t10 = [], []
-            for c, times, p, t0, tilt, _ in walks:
-                if c == case and t0 is not None:
-                    above = (times >= t0) & (p[name] > band)
-                    latency.append(times[above][0] - t0 if above.any() else np.inf)
-                    t10.append(tilt)
-            latency, t10 = np.array(latency), np.array(t10)
-            fired = np.isfinite(latency)
-            early = int(((latency <= 0.5) & (latency < t10)).sum())
-            when = f"{median(latency[fired]):.2f} s" if fired.any() else "-"
-            cells.append(f"{fired.sum()}/{len(latency)}, {when}, {early} early")
-        lines.append(f"| {name} | {band:.2f} | " + " | ".join(cells) + " |")
-    return lines
+            feet = tuple(np.asarray(series[f][trial].values, dtype=float) for f in FEET)
+            walks.append((t["condition"], series[FEET[0]][trial].times, feet, t0, t10, not t["m_fell"]))
+    return walks
+
+
+def contact_rows(walks: list[tuple]) -> list[str]:
+    patterns = []
+    for _, times, feet, *_ in walks:
+        n = max(1, int(round(CONTACT_WINDOW / float(np.median(np.diff(times))))))
+        patterns.append(contact_patterns(*feet, n))
+    return fire_table(walks, {name: [p[name] for p in patterns] for name in ("heel only", "toe only", "one point")})
+
+
+def shared_rows(walks: list[tuple]) -> list[str]:
+    signals = {f"unshared, x {x:g}": [since_shared(times, *feet, x) for _, times, feet, *_ in walks] for x in SHARES}
+    return fire_table(walks, signals)
 
 
 def downhill_without(runs: Path, tag: str) -> list[str]:
@@ -184,7 +217,11 @@ def main(argv: list[str]) -> int:
         print(f"\nthe feet's contacts, each pattern's share of the last {CONTACT_WINDOW:g} s (fires: walks where it")
         print("exceeds the flat walks' band after the touch, the median latency, and how many within 0.5 s and before")
         print(f"the torso passed {TORSO_DEG:g} deg):")
-        print("\n".join(contact_rows(runs, tag)))
+        walks = feet_walks(runs, tag)
+        print("\n".join(contact_rows(walks)))
+        print("\nthe weight shared between the feet: s since both feet last carried at least a share x of the feet's")
+        print("summed pressure (fires, latency and early as above):")
+        print("\n".join(shared_rows(walks)))
         print("\ndownhill -> flat without switching:")
         print("\n".join(downhill_without(runs, tag)), "\n")
     return 0
