@@ -717,7 +717,7 @@ gates on the same seeds. Gated TPE asked exactly the points it asks with flat sc
 splits its trials into a good and a bad group by score, and behind the gate (about nine successes in ten) its good
 group holds successes only, so how failures rank among themselves does not reach its model. Gated CMA-ES with the
 scheduled vigilance was then made a final group (2026-11-29, before it ran on seeds 0-4; its runs on seeds 0-4 are
-in the table above): of the variants tried on these dev seeds, it alone kept its best eta at >= 0.98x plain CMA-ES's
+in the table above): of the variants run on all three dev seeds, it alone kept its best eta at >= 0.98x plain CMA-ES's
 in every seed and reached 10 good gaits in all three, though it failed more often than plain CMA-ES there.
 
 How far two runs of the same plain optimiser differ on this walker, which has no noise (ten seeds each of plain
