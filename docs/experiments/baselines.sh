@@ -70,9 +70,12 @@ if [ -z "${PAGE_ONLY:-}" ]; then
           # the final restarts, and the same with a smaller step (sigma0 0.15) at the start and at every restart
           D="$E --seeds 10,11,12"
           $D --set protocol.proposer.kind=cma --out "$OUT/planar_explore/cma_dev"
+          $D --set protocol.proposer.kind=tpe --out "$OUT/planar_explore/tpe_dev"
           $D --set "protocol.proposer=$GATED_CMA_RESTARTS" --out "$OUT/planar_explore/cma_restarts_dev"
           $D --set 'protocol.proposer={kind: cma, gate: resample, restart_below: 0.1, restart_from: novel, sigma0: 0.15}' \
             --out "$OUT/planar_explore/cma_restarts_sigma0.15"
+          # gated TPE drawing uniformly for its first 40 asks (n_startup_trials 40), the gate in front of them
+          $D --set 'protocol.proposer={kind: tpe, gate: veto, n_startup_trials: 40}' --out "$OUT/planar_explore/tpe_startup40_dev"
           # the gate's vigilance scheduled by (4.14), cautious first and adventurous later, beside the same gated
           # optimisers at a fixed s_vig 0 and sfl at s_vig 0 on the same dev seeds
           $D --set "protocol.proposer=$GATED_CMA" --set modules.vigilance.params.mode=scheduled --out "$OUT/planar_explore/cma_sched_dev"
