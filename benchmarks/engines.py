@@ -93,13 +93,15 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     print(f"before: {machine_load()}", flush=True)
     bodies, commands = {}, {}
     for engine in ENGINES:
-        commands[engine] = gait_commands(new_body(engine, CPGController(CPGParams(circuit="humanoid_nao"))))
+        recorder = new_body(engine, CPGController(CPGParams(circuit="humanoid_nao")))
+        commands[engine] = gait_commands(recorder)
         bodies["a", engine] = new_body(engine)
         bodies["a-walk", engine] = new_body(engine)
         bodies["a1", engine] = new_body(engine, Standing())
         bodies["b", engine] = new_body(engine, CPGController(CPGParams(circuit="humanoid_nao")))
         if NUMBA:
-            bodies["b-numba", engine] = new_body(engine, CPGController(CPGParams(circuit="humanoid_nao", kernel="numba")))
+            compiled = CPGController(CPGParams(circuit="humanoid_nao", kernel="numba"))
+            bodies["b-numba", engine] = new_body(engine, compiled)
     wall: dict[tuple, list[float]] = {key: [] for key in bodies}
     cpu: dict[tuple, list[float]] = {key: [] for key in bodies}
     try:

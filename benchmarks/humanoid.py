@@ -9,7 +9,7 @@ that every trial lasts that long), interleaved in a shuffled order so that all s
 wall time, the CPU time the trial used (this process's for (a)-(b), the two hosting processes' for (c)) and the CPU
 real-time factor (simulated s per CPU s); the load average before, during and after is printed:
 
-(a) physics only: the body built for the trial, then ``actuate`` with the standing command 1000 times (no sensing, no
+(a) physics only: the body built for the trial, then ``actuate`` with the standing command once a tick (no sensing, no
     controller, no messages), as ``benchmarks/planar.py`` (a) steps the planar biped;
 (a-walk) physics only while walking: (a) with the commands the CPG of (b) sent in one trial, replayed in order, open
     loop (benchmarks/engines.py (a-walk)): walking contacts cost PyBullet less than standing ones, so this, not (a),
@@ -101,7 +101,7 @@ def new_body() -> Humanoid:
 
 
 def physics_only(body: Humanoid) -> float:
-    """(a): 1000 ticks of ``actuate`` with the standing command on a freshly started trial."""
+    """(a): a trial's ticks of ``actuate`` with the standing command on a freshly started trial."""
     body.start_trial(REQUEST)
     t = time.perf_counter()
     for _ in range(int(round(SECONDS / body.params.control_dt))):
@@ -120,21 +120,37 @@ def gait_commands(body: Humanoid) -> list[np.ndarray]:
 
     body.actuate = keep
     try:
-        body.handle(REQUEST)
+        result = body.handle(REQUEST)
+        ticks = int(round(body.params.duration / body.params.control_dt))
     finally:
         body.close()
+    assert len(sent) == ticks and not result.metrics["fell"], f"the gait ran {len(sent)} of {ticks} ticks: {result}"
     return sent
+
+
+def _blew_up(body: Humanoid) -> int:
+    """How often MuJoCo found the simulation unstable and reset it (0 on PyBullet, which has no such count)."""
+    data = getattr(getattr(body, "world", None), "data", None)
+    if data is None or not hasattr(data, "warning"):
+        return 0
+    import mujoco
+
+    return int(data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number)
 
 
 def replayed(body: Humanoid, commands: list[np.ndarray]) -> tuple[float, float]:
     """(a-walk): wall and CPU seconds of ``actuate`` with ``commands`` in order, on a freshly started trial; the
     replayed gait must not fall (it walks open loop from the same start)."""
     body.start_trial(REQUEST)
+    blew_up = _blew_up(body)
     wall, cpu = time.perf_counter(), time.process_time()
+    down = 0
     for command in commands:
         body.actuate(command)
+        down += body.fell or body.left_lane  # one add a tick: the judging already ran in actuate
     wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
-    assert not body.fell, "the replayed gait fell: (a-walk) would time a fall, not a walk"
+    assert not down, f"the replayed gait fell or left its lane on {down} ticks: (a-walk) would not time a walk"
+    assert _blew_up(body) == blew_up, "the physics blew up during the replay: (a-walk) would not time a walk"
     return wall, cpu
 
 

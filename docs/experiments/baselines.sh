@@ -28,9 +28,9 @@ SETS=${SETS:-sfl plain gated explore floor}
 GATED_CMA='{kind: cma, gate: resample}'
 GATED_CMA_RESTARTS='{kind: cma, gate: resample, restart_below: 0.1, restart_from: novel}'
 # and CMA-ES behind a gate whose vigilance follows the thesis's schedule (4.14), cautious first and adventurous later:
-# chosen on dev seeds 10-12 of the planar walker (2026-11-28), the only gated variant there that kept its best eta
-# >= 0.98x plain CMA-ES's in every dev seed and reached 10 good gaits in all three; made a final group on 2026-11-29
-# before it ran on seeds 0-4
+# chosen on dev seeds 10-12 of the planar walker (2026-11-28): of the gated variants run on all three, the only one
+# that kept its best eta >= 0.98x its plain optimiser's in every dev seed and reached 10 good gaits in all three;
+# made a final group on 2026-11-29, before it ran on seeds 0-4
 GATED_TPE='{kind: tpe, gate: veto}'
 GATED_SAFE_BO='{kind: safe_bo, gate: veto}'
 

@@ -519,7 +519,7 @@ def explore_against_plain(explored: dict[str, list[Run]], final: dict[str, list[
             plain = final.get(runs[0].kind, []) + explored.get(runs[0].kind, [])
             mine, theirs = paired(runs, plain, key)
             if mine:
-                ratios = ", ".join(f"{a / b:.2f}" for a, b in zip(mine, theirs, strict=True) if b > 0)
+                ratios = ", ".join(f"{a / b:.3f}" for a, b in zip(mine, theirs, strict=True) if b > 0)
                 parts.append(f"{label} {ratios}")
         if parts:
             lines.append(f"{what} over the plain optimiser's run of the same seed: " + "; ".join(parts) + ".")
@@ -708,17 +708,18 @@ front of uniform draws, as `sfl` does, before TPE's model takes over. Their rows
 say how each did; none was made a final group.
 
 Then (issue 33 item 2's third idea, 2026-11-28), on the same dev seeds 10-12: the gate's vigilance scheduled by the
-thesis's (4.14) (`modules.vigilance.params.mode: scheduled`: s_vig drawn each trial in a band that falls from [0, 0.57]
-at the first trial to [-0.72, -0.15] at the 200th, cautious first, adventurous later) for gated CMA-ES and gated TPE,
-beside the same gated optimisers at the fixed s_vig 0 of the final groups and `sfl` at s_vig 0, all on those seeds
-(the last line below pairs each gated group with that `sfl` run). And the issue's second idea, a failure scored by
-how far the trial got (`failure_score: graded`, `progress - 1` in [-1, 0]) instead of a flat 0, behind the same
-gates on the same seeds. Gated TPE asked exactly the points it asks with flat scores, decision for decision: TPE
-splits its trials into a good and a bad group by score, and behind the gate (about nine successes in ten) its good
-group holds successes only, so how failures rank among themselves does not reach its model. Gated CMA-ES with the
-scheduled vigilance was then made a final group (2026-11-29, before it ran on seeds 0-4; its runs on seeds 0-4 are
-in the table above): of the variants run on all three dev seeds, it alone kept its best eta at >= 0.98x plain CMA-ES's
-in every seed and reached 10 good gaits in all three, though it failed more often than plain CMA-ES there.
+thesis's (4.14) (`modules.vigilance.params.mode: scheduled`: s_vig drawn each trial in a band that falls from [0,
+0.57] at the first trial to [-0.72, -0.15] at the 200th, cautious first, adventurous later) for gated CMA-ES and
+gated TPE, beside the same gated optimisers at the fixed s_vig 0 of the final groups and `sfl` at s_vig 0, all on
+those seeds (the last line below pairs each gated group at the fixed s_vig 0 with that `sfl` run; the scheduled ones
+have no `sfl` run at their vigilance). And the issue's second idea, a failure scored by how far the trial got
+(`failure_score: graded`, `progress - 1` in [-1, 0]) instead of a flat 0, behind the same gates on the same seeds.
+Gated TPE asked exactly the points it asks with flat scores, decision for decision: TPE splits its trials into a
+good and a bad group by score, and behind the gate (about nine successes in ten) its good group holds successes
+only, so how failures rank among themselves does not reach its model. Gated CMA-ES with the scheduled vigilance was
+then made a final group (2026-11-29, before it ran on seeds 0-4; its runs on seeds 0-4 are in the table above): of
+the variants run on all three dev seeds, it alone kept its best eta at >= 0.98x its plain optimiser's in every seed
+and reached 10 good gaits in all three, though it failed more often than plain CMA-ES there.
 
 How far two runs of the same plain optimiser differ on this walker, which has no noise (ten seeds each of plain
 CMA-ES and TPE, `baselines.sh`'s `planar/floor` set), is on [`baselines_floor.md`](baselines_floor.md): the bar of

@@ -16,7 +16,8 @@
    the median latency, and how many fire within 0.5 s of the touch and before the torso passes 10 deg.
 4. **The weight shared between the feet** (the next candidate: a foot over a convex edge takes its share of the
    weight late, so the feet go longer without sharing it): per walk, the time since both feet last carried at least
-   a share ``x`` of their summed pressure (heel + toe of each), for x in ``SHARES``; its band and firing as in 3.
+   a share ``x`` of their summed pressure (heel + toe of each), counted from 5 s on, for x in ``SHARES``; its band and
+   firing as in 3.
 
     python docs/experiments/e5_why.py runs/chapter5
 """
@@ -102,12 +103,13 @@ def contact_patterns(heel_l, toe_l, heel_r, toe_r, n: int) -> dict[str, np.ndarr
 
 
 def since_shared(times: np.ndarray, heel_l, toe_l, heel_r, toe_r, share: float) -> np.ndarray:
-    """Each tick's time (s) since both feet last carried at least ``share`` of the feet's summed pressure."""
+    """Each tick's time (s) since both feet last carried at least ``share`` of the feet's summed pressure, counted
+    from SETTLED s at the earliest (a stretch begun in the start ramp does not carry its ramp time into the band)."""
     left, right = np.asarray(heel_l) + np.asarray(toe_l), np.asarray(heel_r) + np.asarray(toe_r)
     total = left + right
     shared = (np.minimum(left, right) >= share * total) & (total > 0)
-    last = np.maximum.accumulate(np.where(shared, times, times[0]))
-    return times - last
+    last = np.maximum(np.maximum.accumulate(np.where(shared, times, times[0])), SETTLED)
+    return np.maximum(times - last, 0.0)
 
 
 def fire_table(walks: list[tuple], signals: dict[str, list[np.ndarray]]) -> list[str]:

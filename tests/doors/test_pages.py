@@ -15,7 +15,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 PAGES = sorted([ROOT / "README.md", *ROOT.glob("docs/**/*.md"), *ROOT.glob("tests/**/*.md")])
 LINK = re.compile(r"\]\(([^)\s]+)\)")  # [text](target)
-REFERENCE = re.compile(r"^ {0,3}\[[^\]]+\]:\s*<?([^>\s]+)>?", re.MULTILINE)  # [label]: target
+REFERENCE = re.compile(r"^ {0,3}\[(?!\^)[^\]]+\]:[ \t]*<?([^>\s]+)>?", re.MULTILINE)  # [label]: target, not [^1]:
 #: a bare upper-case token ending as the scripts name what they fill in (not one quoted as code: `EXPLORE_TEXT`)
 PLACEHOLDER = re.compile(r"(?<![`\w])[A-Z][A-Z0-9]*_(?:TABLE|TEXT|FIGURE|ROWS|HERE)\b")
 
@@ -29,7 +29,8 @@ def tracked() -> frozenset[Path] | None:
     except (OSError, subprocess.CalledProcessError):
         return None
     files = [ROOT / name for name in listed.decode("utf-8", "replace").split("\0") if name]
-    return frozenset([*files, *(folder for f in files for folder in f.parents)])
+    folders = (folder for f in files for folder in f.parents if folder == ROOT or ROOT in folder.parents)
+    return frozenset([*files, *folders])
 
 
 def broken_links(page: Path, known: frozenset[Path] | None = None) -> list[str]:
@@ -64,5 +65,17 @@ def test_the_checks_catch_a_broken_link_and_a_placeholder(tmp_path):
         encoding="utf-8",
     )
     assert broken_links(page) == ["missing.md", "gone/file.py"]
-    assert broken_links(page, frozenset({(tmp_path / "page.md").resolve()})) == ["missing.md", "here.md", "gone/file.py"]
+    known = frozenset({(tmp_path / "page.md").resolve()})
+    assert broken_links(page, known) == ["missing.md", "here.md", "gone/file.py"]
+    assert broken_links(page, known | {(tmp_path / "here.md").resolve()}) == ["missing.md", "gone/file.py"]
     assert PLACEHOLDER.findall(page.read_text(encoding="utf-8")) == ["E51_TABLE"]
+    note = tmp_path / "note.md"
+    note.write_text("a footnote[^1] and a bare label line\n\n[^1]: not a link\n[x]:\nword\n", encoding="utf-8")
+    assert broken_links(note) == []  # neither a footnote nor the next line's first word is read as a link
+
+
+def test_a_folder_outside_the_repository_is_not_tracked():
+    known = tracked()
+    if known is None:
+        pytest.skip("not a git checkout")
+    assert ROOT in known and (ROOT / "docs").resolve() in known and ROOT.parent not in known
