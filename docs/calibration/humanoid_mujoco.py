@@ -27,6 +27,13 @@ to reach the speed target, the actuator only kv per rad/s short of it); kv 10, 2
 or fall (a capped actuator's force is explicit in MuJoCo, a relay between +-cap). Measured 2026-11-27 with this script's
 trials on that first version, which was never committed (the first commit has the clutch).
 About 1 minute on 2 quiet cores (--contact, --servo: 5 minutes).
+
+``--cost``: where a walking MuJoCo trial's physics goes (docs/results/benchmarks.md, issue 31's 3x goal). The CPG's
+commands of one 10-s trial are replayed open loop (as benchmarks/engines.py's (a-walk)) beside the standing command:
+per physics step, contacts (``data.ncon``), Newton iterations (``data.solver_niter``) and the constraint solver's
+share of ``mj_step`` (``data.timer``); then the walking replay's CPU time (median of 5) and the closed-loop trial's
+outcome with MuJoCo's solver options changed one at a time (tolerance, CG, PGS, dense and sparse Jacobian). Nothing
+here changes the shipped model. About 1 minute.
 """
 
 from __future__ import annotations
@@ -114,13 +121,84 @@ def with_world(**constants):
         setattr(humanoid_mjcf, name, value)
 
 
+def solver_cost(repeats: int = 5) -> None:
+    """``--cost``: the walking replay's contacts, iterations and solver share, and its cost under other solver
+    options (the module's docstring)."""
+    import time
+
+    import mujoco
+
+    from benchmarks.humanoid import REQUEST, STANDING_COMMAND, gait_commands
+
+    params = {"duration": 10.0, "physics": "mujoco"}
+    recorder = Humanoid(Humanoid.Params(**params))
+    recorder.logging = False
+    recorder.link = InProcessLink(CPGController(CPGParams(circuit="humanoid_nao")))
+    walking = gait_commands(recorder)
+    body = Humanoid(Humanoid.Params(**params))
+    body.logging = False
+    body.link = InProcessLink(CPGController(CPGParams(circuit="humanoid_nao")))
+    body.handle(REQUEST)  # builds the flat world
+    model, data = body.world.model, body.world.data
+    timers = mujoco.mjtTimer
+
+    def replay(commands) -> tuple[float, float, float, float]:
+        """CPU s of the replay, mean contacts and iterations a step, the constraint solver's share of mj_step."""
+        body.start_trial(REQUEST)
+        contacts = iterations = 0.0
+        cpu = time.process_time()
+        for command in commands:
+            body.actuate(command)
+            contacts += data.ncon
+            iterations += int(data.solver_niter[0])
+        cpu = time.process_time() - cpu
+        share = data.timer[timers.mjTIMER_CONSTRAINT].duration / max(data.timer[timers.mjTIMER_STEP].duration, 1e-12)
+        return cpu, contacts / len(commands), iterations / len(commands), share
+
+    standing = [STANDING_COMMAND] * len(walking)
+    print("| replay (10 s, open loop) | CPU ms | contacts a step | Newton iterations a step | solver share of mj_step |")
+    print("|---|---|---|---|---|")
+    for name, commands in (("standing", standing), ("walking", walking)):
+        runs = [replay(commands) for _ in range(repeats)]
+        cpu = float(np.median([r[0] for r in runs]))
+        _, contacts, iterations, share = runs[-1]
+        print(f"| {name} | {cpu * 1e3:.1f} | {contacts:.1f} | {iterations:.2f} | {share:.0%} |")
+    shipped = (model.opt.solver, model.opt.tolerance, model.opt.jacobian)
+    variants = {
+        "shipped (Newton, tolerance 1e-8, Jacobian auto)": {},
+        "tolerance 1e-6": {"tolerance": 1e-6},
+        "tolerance 1e-5": {"tolerance": 1e-5},
+        "CG solver": {"solver": int(mujoco.mjtSolver.mjSOL_CG)},
+        "PGS solver": {"solver": int(mujoco.mjtSolver.mjSOL_PGS)},
+        "dense Jacobian": {"jacobian": int(mujoco.mjtJacobian.mjJAC_DENSE)},
+        "sparse Jacobian": {"jacobian": int(mujoco.mjtJacobian.mjJAC_SPARSE)},
+    }
+    print("\n| solver option | walking replay, CPU ms | the CPG trial (closed loop): fell, x m | MuJoCo reset it |")
+    print("|---|---|---|---|")
+    for name, changed in variants.items():
+        model.opt.solver, model.opt.tolerance, model.opt.jacobian = shipped
+        for key, value in changed.items():
+            setattr(model.opt, key, value)
+        cpu = float(np.median([replay(walking)[0] for _ in range(repeats)]))
+        bad = int(data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number)
+        metrics = body.handle(REQUEST).metrics
+        bad = max(bad, int(data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number))
+        print(f"| {name} | {cpu * 1e3:.1f} | {metrics['fell']}, {metrics['distance']:.2f} | {'yes' if bad else 'no'} |")
+    model.opt.solver, model.opt.tolerance, model.opt.jacobian = shipped
+    body.close()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--contact", action="store_true", help="vary the contacts' time constant and friction cone")
     parser.add_argument("--servo", action="store_true", help="vary the clutches' time constant")
     parser.add_argument("--walk", type=int, default=3, help="seeds of the CPG gait")
     parser.add_argument("--noise", type=float, default=0.02, help="the body's start_noise, rad")
+    parser.add_argument("--cost", action="store_true", help="where a walking trial's MuJoCo physics goes")
     args = parser.parse_args()
+    if args.cost:
+        solver_cost()
+        return
     shipped = {name: getattr(humanoid_mjcf, name) for name in ("CONTACT_SOLREF", "CONE", "SERVO_SOLREF")}
     print("| engine, setting | trial | outcome |")
     print("|---|---|---|")
