@@ -10,6 +10,7 @@
 # run and writes the page, its figures and its claims (docs/results/baselines.md, docs/results/baselines/).
 #   JOBS=2 bash docs/experiments/baselines.sh                  # everything; on 2 cores about 35 min planar and 1.5 h
 #                                                              # humanoid (2026-11-28: 40 humanoid runs in 70 min)
+#                                                              # (2026-11-29, a faster 2-vCPU EPYC: all in 55 min)
 #   BODIES=planar SETS="sfl plain" bash docs/experiments/baselines.sh    # a part of it
 #   PAGE_ONLY=1 bash docs/experiments/baselines.sh             # the page from the runs there are
 #   BODIES=planar SETS=floor bash docs/experiments/baselines.sh  # the plain optimisers' own spread (about 3 min)
