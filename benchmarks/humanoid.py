@@ -130,12 +130,11 @@ def gait_commands(body: Humanoid) -> list[np.ndarray]:
 
 def _blew_up(body: Humanoid) -> int:
     """How often MuJoCo found the simulation unstable and reset it (0 on PyBullet, which has no such count)."""
-    data = getattr(getattr(body, "world", None), "data", None)
-    if data is None or not hasattr(data, "warning"):
+    if body.params.physics != "mujoco":
         return 0
     import mujoco
 
-    return int(data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number)
+    return int(body.world.data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number)
 
 
 def replayed(body: Humanoid, commands: list[np.ndarray]) -> tuple[float, float]:

@@ -156,7 +156,7 @@ def solver_cost(repeats: int = 5) -> None:
         return cpu, contacts / len(commands), iterations / len(commands), share
 
     standing = [STANDING_COMMAND] * len(walking)
-    print("| replay (10 s, open loop) | CPU ms | contacts a step | Newton iterations a step | solver share of mj_step |")
+    print("| replay (10 s, open loop) | CPU ms | contacts a step | Newton iterations a step | solver share of step |")
     print("|---|---|---|---|---|")
     for name, commands in (("standing", standing), ("walking", walking)):
         runs = [replay(commands) for _ in range(repeats)]

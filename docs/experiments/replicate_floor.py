@@ -8,11 +8,11 @@ Each STUDY is a ``sfl study`` folder of one plain optimiser over ten seeds (docs
 noise: a trial's outcome is a function of its parameters, so two seeds of a plain optimiser differ only in the
 optimiser's own random draws, and the ten runs are replicates of one another.
 
-Per study: each seed's best eta (the largest eta of a successful trial; a run with no success is left out) and, over every way of taking five of the ten
-runs as "the optimiser under test" and pairing them one to one with the five others as "the plain optimiser" (252 x
-120 = 30,240 pairings, all enumerated), the share in which every pair's ratio is >= 0.98: the chance that the plain
-optimiser itself, run again, meets the goal's every-seed bar. Also the share of single ordered pairs >= 0.98 and the
-smallest ratio.
+Per study: each seed's best eta (the largest eta of a successful trial; a run with no success is left out) and, over
+every way of taking five of the ten runs as "the optimiser under test" and pairing them one to one with the five
+others as "the plain optimiser" (252 x 120 = 30,240 pairings, all enumerated), the share in which every pair's ratio
+is >= 0.98: the chance that the plain optimiser itself, run again, meets the goal's every-seed bar. Also the share of
+single ordered pairs >= 0.98 and the smallest ratio.
 """
 
 from __future__ import annotations
