@@ -264,6 +264,7 @@ class Supervisor:
 
     def stop(self, grace: float = 3.0) -> None:
         """Stop every child: SIGTERM, then SIGKILL after ``grace`` seconds; close the session."""
+        self.watch.settle(self.children)  # a process seen stopped that has run again since: said before it ends
         try:
             processes.stop_all(self.children.values(), grace)
         finally:

@@ -62,6 +62,8 @@ class HangWatch:
         waited = self.waited_on(children, pending)
         for unit in [u for u in self._clocks if u not in waited]:
             del self._clocks[unit]
+        watched = {name for unit in waited for name in unit}
+        self.settle(children, [name for name in self._stopped if name not in watched])
         for unit, (limit, key, doing, tickets) in waited.items():
             procs = [children[name].proc for name in unit]
             samples = [cpu_sample(proc.pid) if proc is not None else None for proc in procs]
@@ -76,6 +78,17 @@ class HangWatch:
             clock.reset()
             for name in spinning or unit:
                 yield name, ModuleHung(name, had, key, limit, doing)
+
+    def settle(self, children: Mapping[str, Child], names: list[str] | None = None) -> None:
+        """Tell which of the processes seen stopped (``names``: all of them) run again, though the run no longer
+        waits on them: their request may have been answered, or the run ended, before the next look."""
+        for name in list(self._stopped) if names is None else names:
+            child = children.get(name)
+            sample = cpu_sample(child.proc.pid) if child is not None and child.proc is not None else None
+            if sample is None:  # gone: its exit is told elsewhere
+                self._stopped.discard(name)
+            else:
+                self._tell_stopped((name,), [sample])
 
     def _tell_stopped(self, unit: tuple[str, ...], samples: list) -> None:
         """Say once when a process the run waits on is stopped, and when it runs again."""

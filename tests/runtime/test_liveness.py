@@ -20,7 +20,12 @@ import pytest
 
 from sfl_brain.protocols.local import run_local
 from sfl_brain.recording.records import read_records
-from sfl_brain.runtime.liveness import CpuSample, NoProgressClock, cpu_sample, had_the_cpu
+from sfl_brain.events import Events, ModuleStopped
+from sfl_brain.messages import Ack
+from sfl_brain.runtime.inbox import Pending
+from sfl_brain.runtime.liveness import CpuSample, NoProgressClock, ProgressBoard, cpu_sample, had_the_cpu
+from sfl_brain.runtime.processes import Child
+from sfl_brain.runtime.watch import HangWatch
 from sfl_brain.runtime.placement import usable_cpus
 from sfl_brain.scenario import load
 
@@ -101,6 +106,59 @@ def test_a_controller_stopped_mid_trial_longer_than_its_tick_time_out_resumes_th
     rows = read_records(out)
     assert not [r for r in rows if r["kind"] == "retry"]
     assert stable(rows) == stable(run_local(load(WALKER, sets)))
+
+
+def test_a_process_seen_stopped_is_said_to_run_again_when_the_run_no_longer_waits_on_it(tmp_path):
+    """A CI run at c37a163: the controller was continued and the run's last trial ended before the watch's next look,
+    so the run said it waited on it and never that it ran again. A real stopped process: told stopped while a
+    request waits on it; continued and its request answered, told running at the next look (or when the run stops,
+    :meth:`HangWatch.settle`); gone, never told running."""
+    plan = load(WALKER)
+    events, told = Events(), []
+    events.subscribe(ModuleStopped, lambda e: told.append((e.name, e.stopped)))
+    watch = HangWatch(plan, events)
+    board = ProgressBoard(tmp_path, [i.name for i in plan.instances])
+    instances = {i.name: i for i in plan.instances}
+    procs = [subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"]) for _ in range(2)]
+    try:
+        names = ["acc", "ofc"]
+        children = {name: Child(instances[name], tmp_path / name, proc, alive=True) for name, proc in zip(names, procs)}
+        pending = {1: Pending("acc", Ack()), 2: Pending("ofc", Ack())}
+        for proc in procs:
+            proc.send_signal(signal.SIGSTOP)
+        poll_until(lambda: all(cpu_sample(p.pid).state in "Tt" for p in procs), "both to stop", 30)
+        list(watch.hung(board, children, pending))
+        assert sorted(told) == [("acc", True), ("ofc", True)]
+        for proc in procs:
+            proc.send_signal(signal.SIGCONT)
+        poll_until(lambda: all(cpu_sample(p.pid).state not in "Tt" for p in procs), "both to run again", 30)
+        pending[1].done = pending[2].done = True  # answered: the run no longer waits on them
+        watch._next_watch = 0.0  # the next look, without waiting WATCH_PERIOD
+        list(watch.hung(board, children, {1: pending[1]}))
+        assert sorted(told[2:]) == [("acc", False), ("ofc", False)]
+        # stopped again, then continued, and the run stops before its next look: said when it stops
+        procs[0].send_signal(signal.SIGSTOP)
+        poll_until(lambda: cpu_sample(procs[0].pid).state in "Tt", "it to stop", 30)
+        watch._next_watch = 0.0
+        list(watch.hung(board, children, {3: Pending("acc", Ack())}))
+        procs[0].send_signal(signal.SIGCONT)
+        poll_until(lambda: cpu_sample(procs[0].pid).state not in "Tt", "it to run again", 30)
+        watch.settle(children)
+        assert told[4:] == [("acc", True), ("acc", False)]
+        # stopped, then gone: not said to run again
+        procs[1].send_signal(signal.SIGSTOP)
+        poll_until(lambda: cpu_sample(procs[1].pid).state in "Tt", "it to stop", 30)
+        watch._next_watch = 0.0
+        list(watch.hung(board, children, {4: Pending("ofc", Ack())}))
+        procs[1].kill()
+        procs[1].wait()
+        watch.settle(children)
+        assert told[6:] == [("ofc", True)]
+    finally:
+        board.close()
+        for proc in procs:
+            proc.kill()
+            proc.wait()
 
 
 #: a busy loop ends by itself after this many seconds, should the test that started it be killed before it kills them
