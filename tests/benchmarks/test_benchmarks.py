@@ -10,6 +10,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from ..conftest import on_all_cores
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -79,6 +81,26 @@ def test_humanoid_benchmark_prints_the_trial_over_processes_against_one_process(
     figures(out, r"\(a-walk\) physics only, the gait's commands +[\d.]+ ms  \( *([\d.]+)x real time")
     figures(out, r"\(b\) / floor = ([\d.]+)x, the most any controller could gain")
     assert "one 5-s trial (500 control ticks, 2000 physics steps)" in out
+
+
+def test_humanoid_against_times_the_revision_issue_31_was_filed_against_beside_this_checkout():
+    shallow = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--is-shallow-repository"], capture_output=True,
+                             text=True).stdout.strip()  # fmt: skip
+    if shallow != "false":
+        pytest.skip("not a full git clone: the earlier revision is not here")
+    out = bench("humanoid_against.py", "--repeats", "1", "--seconds", "2")
+    rev = re.search(r"\(rev\) ee74889 \(ee74889\) +[\d.]+ ms .* distance (\S+)", out)
+    now = re.search(r"\(b\) this checkout +[\d.]+ ms .* distance (\S+)", out)
+    assert rev and now, out
+    assert rev.group(1) == now.group(1)  # the revision's own code ran the same trial, bit for bit
+    figures(out, r"\(rev\)/\(b\) = ([\d.]+)x")
+    done = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "humanoid_against.py"), "no-such-rev"],
+        capture_output=True, text=True, timeout=60, cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode == 2 and "REV: expected a commit" in done.stderr and "Traceback" not in done.stderr
+    assert "sfl-against-" not in subprocess.run(["git", "-C", str(ROOT), "worktree", "list"], capture_output=True,
+                                                text=True).stdout  # its worktree is gone  # fmt: skip
 
 
 def test_engines_benchmark_prints_pybullet_against_mujoco():
