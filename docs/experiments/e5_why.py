@@ -18,6 +18,11 @@
    weight late, so the feet go longer without sharing it): per walk, the time since both feet last carried at least
    a share ``x`` of their summed pressure (heel + toe of each), counted from 5 s on, for x in ``SHARES``; its band and
    firing as in 3.
+5. **A foot on its heel alone, pitched past the ground it walked on** (a foot whose heel has landed beyond a convex
+   edge rotates toe-down past the old ground before its toe finds the new one; at a concave edge, a foot on its toe
+   alone rotates toe-up past it): per walk, the most any foot on its heel alone pitches toe-down past the slope of the
+   piece walked before the edge (deg; the sole's pitch is the torso's plus the leg's pitch joints, as the ankle
+   adaptation reads it), and the same for a foot on its toe alone pitching toe-up; band and firing as in 3.
 
     python docs/experiments/e5_why.py runs/chapter5
 """
@@ -35,6 +40,10 @@ from sfl_brain.report.terrain import detector_of
 
 #: each walk's case (e5_detectors.yaml) and the slope of the ground it walks onto, deg
 NEW_SLOPE = {"flatdown": -10.0, "upflat": 0.0, "up": 10.0, "down": 0.0}
+#: the slope of the ground each case walks before the edge, deg (the flat walks' too)
+OLD_SLOPE = {"flat": 0.0, "flatdown": 0.0, "upflat": 10.0, "up": 0.0, "down": -10.0}
+#: the joints whose angles, added to the torso's pitch, give a sole's pitch in the world (+ = toe down)
+CHAIN = ("hip_pitch", "knee", "ankle_pitch")
 NEAR_DEG = 3.0  # a foot senses the new slope: its estimate within this of the new piece's slope
 TORSO_DEG = 10.0
 CONTACT_WINDOW = 0.33  # s, half a gait cycle (0.667 s): a foot's stance
@@ -125,7 +134,7 @@ def fire_table(walks: list[tuple], signals: dict[str, list[np.ndarray]]) -> list
         cells = []
         for case in NEW_SLOPE:
             latency, t10 = [], []
-            for (c, times, _, t0, tilt, _), v in zip(walks, values, strict=True):
+            for (c, times, _, t0, tilt, *_), v in zip(walks, values, strict=True):
                 if c == case and t0 is not None:
                     above = (times >= t0) & (v > band)
                     latency.append(times[above][0] - t0 if above.any() else np.inf)
@@ -141,12 +150,13 @@ def fire_table(walks: list[tuple], signals: dict[str, list[np.ndarray]]) -> list
 
 def feet_walks(runs: Path, tag: str) -> list[tuple]:
     """Per walk of ``detectors{tag}_s0..2``: (case, times, the four feet signals, touch time or None, time from the
-    touch until the torso passed TORSO_DEG, stayed up)."""
+    touch until the torso passed TORSO_DEG, stayed up, each sole's pitch in the world (deg, left and right))."""
     walks = []
+    joints = [f"body/joints/{joint}_{side}" for side in "lr" for joint in CHAIN]
     for seed in range(3):
         run = runs / f"detectors{tag}_s{seed}"
         rrd = run / "recording.rrd"
-        series = read_series(rrd, [*FEET, "body/torso/pitch"])
+        series = read_series(rrd, [*FEET, "body/torso/pitch", *joints])
         touched = read_events(rrd, ["body/events/terrain"])["body/events/terrain"]
         for t in table(run / "trials.parquet"):
             trial = int(t["trial"])
@@ -157,7 +167,11 @@ def feet_walks(runs: Path, tag: str) -> list[tuple]:
             tilted = (pitch.times >= (t0 or 0.0)) & (np.abs(pitch.values) > TORSO_DEG)
             t10 = pitch.times[tilted][0] - t0 if t0 is not None and tilted.any() else np.inf
             feet = tuple(np.asarray(series[f][trial].values, dtype=float) for f in FEET)
-            walks.append((t["condition"], series[FEET[0]][trial].times, feet, t0, t10, not t["m_fell"]))
+            soles = tuple(
+                pitch.values + sum(np.asarray(series[f"body/joints/{joint}_{side}"][trial].values) for joint in CHAIN)
+                for side in "lr"
+            )
+            walks.append((t["condition"], series[FEET[0]][trial].times, feet, t0, t10, not t["m_fell"], soles))
     return walks
 
 
@@ -172,6 +186,23 @@ def contact_rows(walks: list[tuple]) -> list[str]:
 def shared_rows(walks: list[tuple]) -> list[str]:
     signals = {f"unshared, x {x:g}": [since_shared(times, *feet, x) for _, times, feet, *_ in walks] for x in SHARES}
     return fire_table(walks, signals)
+
+
+def pitched_past(case: str, feet: tuple, soles: tuple) -> dict[str, np.ndarray]:
+    """Each tick's most any foot on its heel alone pitches toe-down past the old ground (deg; 0 when none is on its
+    heel alone), and any foot on its toe alone toe-up past it."""
+    heel_l, toe_l, heel_r, toe_r = (np.asarray(v) >= PRESSED for v in feet)
+    old = OLD_SLOPE[case]
+    down, up = np.zeros(len(soles[0])), np.zeros(len(soles[0]))
+    for heel, toe, sole in ((heel_l, toe_l, soles[0]), (heel_r, toe_r, soles[1])):
+        down = np.maximum(down, np.where(heel & ~toe, old + sole, 0.0))  # the slope under it: -sole (+ = uphill)
+        up = np.maximum(up, np.where(toe & ~heel, -sole - old, 0.0))
+    return {"heel alone, toe-down past the old ground": down, "toe alone, toe-up past the old ground": up}
+
+
+def pitched_rows(walks: list[tuple]) -> list[str]:
+    signals = [pitched_past(case, feet, soles) for case, _, feet, *_, soles in walks]
+    return fire_table(walks, {name: [p[name] for p in signals] for name in signals[0]})
 
 
 def downhill_without(runs: Path, tag: str) -> list[str]:
@@ -224,6 +255,9 @@ def main(argv: list[str]) -> int:
         print("\nthe weight shared between the feet: s since both feet last carried at least a share x of the feet's")
         print("summed pressure (fires, latency and early as above):")
         print("\n".join(shared_rows(walks)))
+        print("\na foot on its heel (toe) alone pitched toe-down (toe-up) past the slope of the ground walked before")
+        print("the edge, deg (fires, latency and early as above):")
+        print("\n".join(pitched_rows(walks)))
         print("\ndownhill -> flat without switching:")
         print("\n".join(downhill_without(runs, tag)), "\n")
     return 0
