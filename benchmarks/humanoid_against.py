@@ -46,7 +46,8 @@ def trial_at(root: Path, seconds: float, kernel: str | None = None) -> dict:
     args = [sys.executable, str(HERE / "_trial_at.py"), str(root), "1", str(seconds), *([kernel] if kernel else [])]
     done = subprocess.run(args, capture_output=True, text=True, timeout=600)
     if done.returncode != 0:
-        raise RuntimeError(f"the trial at {root} failed:\n{done.stderr[-3000:]}")
+        last = (done.stderr.strip().splitlines() or ["no output"])[-1]
+        raise RuntimeError(f"the trial of the code at {root} could not run: {last}")
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
@@ -74,12 +75,16 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
             where = {"rev": (tree, None), "b": (ROOT, None), "b-numba": (ROOT, "numba")}
             runs: dict[str, list[dict]] = {item: [] for item in items}
             rounds = random.Random(0)
-            for _ in range(args.repeats):
-                order = list(items)
-                rounds.shuffle(order)
-                for item in order:
-                    root, kernel = where[item]
-                    runs[item].append(trial_at(root, args.seconds, kernel))
+            try:
+                for _ in range(args.repeats):
+                    order = list(items)
+                    rounds.shuffle(order)
+                    for item in order:
+                        root, kernel = where[item]
+                        runs[item].append(trial_at(root, args.seconds, kernel))
+            except RuntimeError as e:
+                print(f"humanoid_against.py: {e}", file=sys.stderr)
+                raise SystemExit(2) from None
             print(f"after: {machine_load()}", flush=True)
         finally:
             git("worktree", "remove", "--force", str(tree))
@@ -93,6 +98,9 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
         runs_item = runs[item][0]
         print(f"  {names[item]:<34} {out[item] * 1e3:7.1f} ms  (CPU {statistics.median(cpu[item]) * 1e3:7.1f} ms, "
               f"{args.seconds / out[item]:5.1f}x real time)  distance {runs_item['distance']!r}")  # fmt: skip
+    same = runs["rev"][0]["distance"] == runs["b"][0]["distance"]
+    print(f"  the same trial in both revisions: {'yes' if same else 'no'} (the numpy CPG's distances "
+          f"{'equal' if same else 'differ'})")  # fmt: skip
     for item in items[1:]:
         ratio = statistics.median(a / b for a, b in zip(wall["rev"], wall[item], strict=True))
         out[f"rev/{item}"] = ratio

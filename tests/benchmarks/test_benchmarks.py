@@ -93,6 +93,7 @@ def test_humanoid_against_times_the_revision_issue_31_was_filed_against_beside_t
     now = re.search(r"\(b\) this checkout +[\d.]+ ms .* distance (\S+)", out)
     assert rev and now, out
     assert rev.group(1) == now.group(1)  # the revision's own code ran the same trial, bit for bit
+    assert "the same trial in both revisions: yes" in out
     figures(out, r"\(rev\)/\(b\) = ([\d.]+)x")
     done = subprocess.run(
         [sys.executable, str(ROOT / "benchmarks" / "humanoid_against.py"), "no-such-rev"],
