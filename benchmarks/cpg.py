@@ -9,6 +9,9 @@ humanoid circuit (12 joints, 24 cells):
 - the controller's tick as the framework runs it in the body's process: ``InProcessLink.step(frame)`` ->
   ``CPGController.on_sensor_frame`` (dispatch, wiring by name, the network, the ``MotorCommand``);
 
+- a batch of ``BATCH`` (8) copies of the humanoid network (``CPGNetwork(batch=8)``: ``advance`` + ``command_all``),
+  the CPG of issue 31's batched trials: its cost per copy beside one network alone;
+
 each on both kernels of the network when numba is installed (``CPGParams.kernel``: "numpy", the default, and "numba",
 the same RK4 and layers compiled, issue 31; goal: numba <= 0.4x numpy per tick), and one physics tick of
 
@@ -45,6 +48,7 @@ except ImportError:
     PlanarWalker8 = None
 
 CIRCUITS = (("planar_8link", "7 joints, 14 cells"), ("humanoid_nao", "12 joints, 24 cells"))
+BATCH = 8  # copies in the batched humanoid network (issue 31 item 4: K = 8)
 
 
 def frame_for(circuit) -> np.ndarray:
@@ -120,6 +124,12 @@ def main() -> None:
             networks[name, kernel] = (CPGNetwork(circuit, kernel=kernel), frame_for(circuit))
             links[name, kernel] = controller_link(name, kernel)
             networks[name, kernel][0].advance(networks[name, kernel][1])  # numba compiles (or loads) on the first call
+    batched = {}
+    for kernel in KERNELS:
+        humanoid = networks["humanoid_nao", kernel][1]
+        network = CPGNetwork(load_circuit("humanoid_nao"), batch=BATCH, kernel=kernel)
+        batched[kernel] = (network, np.tile(humanoid, (BATCH, 1)))
+        batched[kernel][0].advance(batched[kernel][1])
     command = np.array([1.0, -1.0, 0.5, 0.5])
     biped = stand_in()
     walker = Walker() if PlanarWalker8 is not None else None
@@ -141,6 +151,11 @@ def main() -> None:
             tag = "" if kernel == "numpy" else f" {kernel}"
             samples.setdefault(f"{name} advance{tag}", []).append(t1 - t0)
             samples.setdefault(f"{name} controller{tag}", []).append(t3 - t2)
+        for kernel, (network, sensors) in batched.items():
+            t0 = clock()
+            network.advance(sensors)
+            network.command_all()
+            samples.setdefault(f"batch {kernel}", []).append(clock() - t0)
         t0 = clock()
         biped.actuate(command)
         samples["biped"].append(clock() - t0)
@@ -173,6 +188,12 @@ def main() -> None:
                 tag = "" if kernel == "numpy" else f" {kernel}"
                 ratios = "".join(f"{medians[f'{name} {kind}{tag}'] / medians[key]:>24.2f}" for key, _ in physics)
                 print(f"  {f'{name} {kind}{tag}':<32}{ratios}")
+    print(f"humanoid_nao, a batch of {BATCH} copies (advance + command_all), per tick and per copy:")
+    for kernel in KERNELS:
+        tag = "" if kernel == "numpy" else f" {kernel}"
+        whole, alone = medians[f"batch {kernel}"], medians[f"humanoid_nao advance{tag}"]
+        print(f"  {kernel:<8}{whole * 1e6:8.1f} us a tick, {whole / BATCH * 1e6:6.1f} us a copy: "
+              f"{whole / BATCH / alone:.2f} of one network alone ({alone * 1e6:.1f} us)")  # fmt: skip
     if "numba" in KERNELS:  # medians of the per-tick ratios: each pair timed in the same tick
         print("numba / numpy per tick, median of the ratios (goal <= 0.4):")
         for name, _ in CIRCUITS:

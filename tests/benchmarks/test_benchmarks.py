@@ -129,6 +129,8 @@ def test_cpg_benchmark_prints_the_cost_per_tick_beside_the_physics():
     figures(out, r"median +([\d.]+) us", count=10 if compiled else 6)
     if compiled:  # numba / numpy per tick, each circuit's network and controller tick
         figures(out, r"  (?:planar_8link|humanoid_nao) (?:advance|controller) +([\d.]+)\n", count=4)
+    # a batch of 8 humanoid networks: its cost per copy against one network alone, on each kernel
+    figures(out, r"us a copy: ([\d.]+) of one network alone", count=2 if compiled else 1)
 
 
 def test_proposers_benchmark_prints_each_proposers_cost_beside_the_trial():
