@@ -14,6 +14,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -25,7 +26,7 @@ from sfl_brain.messages import Ack
 from sfl_brain.runtime.inbox import Pending
 from sfl_brain.runtime.liveness import CpuSample, NoProgressClock, ProgressBoard, cpu_sample, had_the_cpu
 from sfl_brain.runtime.processes import Child
-from sfl_brain.runtime.watch import HangWatch
+from sfl_brain.runtime.watch import WATCH_PERIOD, HangWatch
 from sfl_brain.runtime.placement import usable_cpus
 from sfl_brain.scenario import load
 
@@ -133,13 +134,13 @@ def test_a_process_seen_stopped_is_said_to_run_again_when_the_run_no_longer_wait
             proc.send_signal(signal.SIGCONT)
         poll_until(lambda: all(cpu_sample(p.pid).state not in "Tt" for p in procs), "both to run again", 30)
         pending[1].done = pending[2].done = True  # answered: the run no longer waits on them
-        watch._next_watch = 0.0  # the next look, without waiting WATCH_PERIOD
+        time.sleep(WATCH_PERIOD)  # the watch looks again
         list(watch.hung(board, children, {1: pending[1]}))
         assert sorted(told[2:]) == [("acc", False), ("ofc", False)]
         # stopped again, then continued, and the run stops before its next look: said when it stops
         procs[0].send_signal(signal.SIGSTOP)
         poll_until(lambda: cpu_sample(procs[0].pid).state in "Tt", "it to stop", 30)
-        watch._next_watch = 0.0
+        time.sleep(WATCH_PERIOD)
         list(watch.hung(board, children, {3: Pending("acc", Ack())}))
         procs[0].send_signal(signal.SIGCONT)
         poll_until(lambda: cpu_sample(procs[0].pid).state not in "Tt", "it to run again", 30)
@@ -148,7 +149,7 @@ def test_a_process_seen_stopped_is_said_to_run_again_when_the_run_no_longer_wait
         # stopped, then gone: not said to run again
         procs[1].send_signal(signal.SIGSTOP)
         poll_until(lambda: cpu_sample(procs[1].pid).state in "Tt", "it to stop", 30)
-        watch._next_watch = 0.0
+        time.sleep(WATCH_PERIOD)
         list(watch.hung(board, children, {4: Pending("ofc", Ack())}))
         procs[1].kill()
         procs[1].wait()
