@@ -12,9 +12,10 @@ up to their order: commands within 1e-9 of the numpy step's over a walk (tests/m
 
 numpy pays about a microsecond per call on arrays of 24 cells, and its step needs 21 calls per RK4 step: 210 per
 10-ms tick. Compiled, the whole tick is one call, whose cost is then its 1,920 hyperbolic tangents (two per cell per
-RK4 stage): :func:`tanh` takes them from one ``exp`` each, about twice as fast as the C library's ``tanh`` in this loop
-and within 2.3e-16 of it (absolute, over [-25, 25]). numba is optional (``pip install -e '.[fast]'``): without it the
-network integrates with numpy. The first call compiles (about a second; then cached on disk, ``cache=True``).
+RK4 stage): :func:`tanh` takes them from one ``exp`` each, cheaper than the C library's ``tanh`` and within 2.3e-16 of
+it (absolute, over [-25, 25]); ``benchmarks/cpg.py`` times the tick. numba is optional (``pip install -e '.[fast]'``):
+without it the network integrates with numpy. The first call compiles (about a second; then cached on disk,
+``cache=True``).
 """
 
 from __future__ import annotations
