@@ -23,6 +23,12 @@
    alone rotates toe-up past it): per walk, the most any foot on its heel alone pitches toe-down past the slope of the
    piece walked before the edge (deg; the sole's pitch is the torso's plus the leg's pitch joints, as the ankle
    adaptation reads it), and the same for a foot on its toe alone pitching toe-up; band and firing as in 3.
+6. **Anything the body senses that the flat walks do not show** (a generic detector: if any sensed signal changed at
+   a convex edge before the robot pitched over, this would see it): per walk that starts on the flat, the
+   Mahalanobis distance of the sensed state (the ten leg joints, the four feet signals, the torso's pitch, roll and
+   their rates) from the flat walks' mean at the same gait phase (eight bins of the left hip's oscillation), the model
+   fitted on the other two seeds' flat walks that stayed up (from 5 s on), averaged over 3 samples; band and firing
+   as in 3. The walks that start on a ramp are left out (they are far from a flat model from their first step).
 
     python docs/experiments/e5_why.py runs/chapter5
 """
@@ -205,6 +211,59 @@ def pitched_rows(walks: list[tuple]) -> list[str]:
     return fire_table(walks, {name: [p[name] for p in signals] for name in signals[0]})
 
 
+#: the sensed state of 6.: the leg joints, the feet (pressures clipped at NOVELTY_PRESS N and scaled), the torso
+NOVELTY_JOINTS = [f"body/joints/{j}_{side}" for j in ("hip_pitch", "hip_roll", "knee", "ankle_pitch", "ankle_roll")
+                  for side in "lr"]  # fmt: skip
+TORSO = ["body/torso/pitch", "body/torso/pitch_rate", "body/torso/roll", "body/torso/roll_rate"]
+NOVELTY = NOVELTY_JOINTS + FEET + TORSO
+NOVELTY_PRESS, PHASES, GAIT_HZ = 30.0, 8, 1.5
+
+
+def gait_phase(hip: np.ndarray, dt: float) -> np.ndarray:
+    """Each sample's phase bin (0..PHASES-1) of the hip's oscillation: the angle of (x, -x'/omega) of its deviation
+    x from a 0.67-s running mean (omega: the gait's 1.5 Hz)."""
+    x = hip - np.convolve(hip, np.ones(17) / 17, mode="same")
+    v = np.gradient(x, dt) / (2 * np.pi * GAIT_HZ)
+    return ((np.arctan2(-v, x) + np.pi) / (2 * np.pi) * PHASES).astype(int) % PHASES
+
+
+def novelty_rows(runs: Path, tag: str) -> list[str]:
+    walks, states = [], []
+    for seed in range(3):
+        run = runs / f"detectors{tag}_s{seed}"
+        rrd = run / "recording.rrd"
+        series = read_series(rrd, NOVELTY)
+        touched = read_events(rrd, ["body/events/terrain"])["body/events/terrain"]
+        for t in table(run / "trials.parquet"):
+            trial = int(t["trial"])
+            if t["condition"] not in ("flat", "flatdown", "up") or trial not in series[NOVELTY[0]]:
+                continue
+            times = series[NOVELTY[0]][trial].times
+            x = np.stack([np.asarray(series[name][trial].values, dtype=float) for name in NOVELTY], axis=1)
+            feet = slice(len(NOVELTY_JOINTS), len(NOVELTY_JOINTS) + len(FEET))
+            x[:, feet] = np.minimum(x[:, feet], NOVELTY_PRESS) / 10.0
+            t0 = touched[trial].times[0] if trial in touched else None
+            pitch = x[:, NOVELTY.index("body/torso/pitch")]
+            tilted = (times >= (t0 or 0.0)) & (np.abs(pitch) > TORSO_DEG)
+            t10 = times[tilted][0] - t0 if t0 is not None and tilted.any() else np.inf
+            walks.append((t["condition"], times, None, t0, t10, not t["m_fell"]))
+            states.append((seed, x, gait_phase(x[:, 0], float(np.median(np.diff(times))))))
+    signals = []
+    for (case, times, *_), (seed, x, phase) in zip(walks, states, strict=True):
+        others = [(w, st) for w, st in zip(walks, states, strict=True) if w[0] == "flat" and w[5] and st[0] != seed]
+        distance = np.zeros(len(times))
+        for b in range(PHASES):
+            rows = np.concatenate([st[1][(st[2] == b) & (w[1] >= SETTLED)] for w, st in others])
+            cov = np.cov(rows.T)
+            cov += 1e-3 * np.trace(cov) / len(cov) * np.eye(len(cov))  # a little ridge: some signals hardly move
+            here = phase == b
+            d = x[here] - rows.mean(axis=0)
+            distance[here] = np.sqrt(np.einsum("ij,jk,ik->i", d, np.linalg.inv(cov), d))
+        distance[times < SETTLED] = 0.0
+        signals.append(np.convolve(distance, np.ones(3) / 3)[: len(times)])
+    return fire_table(walks, {"novelty against the flat walks (other seeds)": signals})
+
+
 def downhill_without(runs: Path, tag: str) -> list[str]:
     sweep = table(runs / "presweep" / "trials.parquet")
     axes = ["gain_pitch", "gain_roll", "sigma_s"]
@@ -258,6 +317,9 @@ def main(argv: list[str]) -> int:
         print("\na foot on its heel (toe) alone pitched toe-down (toe-up) past the slope of the ground walked before")
         print("the edge, deg (fires, latency and early as above):")
         print("\n".join(pitched_rows(walks)))
+        print("\nthe sensed state's distance from the flat walks' at the same gait phase (walks that start on the")
+        print("flat; up -> flat and down -> flat start on a ramp and are left out):")
+        print("\n".join(novelty_rows(runs, tag)))
         print("\ndownhill -> flat without switching:")
         print("\n".join(downhill_without(runs, tag)), "\n")
     return 0
