@@ -83,17 +83,17 @@ class HangWatch:
         """Tell which of the processes seen stopped (``names``: all of them) run again, though the run no longer
         waits on them: their request may have been answered, or the run ended, before the next look."""
         for name in list(self._stopped) if names is None else names:
-            child = children.get(name)
-            sample = cpu_sample(child.proc.pid) if child is not None and child.proc is not None else None
-            if sample is None:  # gone: its exit is told elsewhere
-                self._stopped.discard(name)
-            else:
-                self._tell_stopped((name,), [sample])
+            proc = children[name].proc if name in children else None
+            self._tell_stopped((name,), [cpu_sample(proc.pid) if proc is not None else None])
 
     def _tell_stopped(self, unit: tuple[str, ...], samples: list) -> None:
-        """Say once when a process the run waits on is stopped, and when it runs again."""
+        """Say once when a process the run waits on is stopped, and when it runs again; one that is gone (no sample)
+        is forgotten, not said to run: its exit is told elsewhere."""
         for name, sample in zip(unit, samples, strict=True):
-            stopped = sample is not None and sample.state in "Tt"
+            if sample is None:
+                self._stopped.discard(name)
+                continue
+            stopped = sample.state in "Tt"
             if stopped != (name in self._stopped):
                 (self._stopped.add if stopped else self._stopped.discard)(name)
                 self.events.publish(ModuleStopped(name, stopped))
