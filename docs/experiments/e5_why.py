@@ -29,6 +29,11 @@
    their rates) from the flat walks' mean at the same gait phase (eight bins of the left hip's oscillation), the model
    fitted on the other two seeds' flat walks that stayed up (from 5 s on), averaged over 3 samples; band and firing
    as in 3. The walks that start on a ramp are left out (they are far from a flat model from their first step).
+7. **The line between the feet** (a convex edge puts the front foot lower than the back one): per tick with both
+   feet pressing, the slope of the line between each foot's pressed points (heel, toe or their middle; the legs'
+   kinematics from the table and the torso's pitch and roll), fore and aft, against the slope walked before the edge,
+   counted where the feet are at least ``SPACING`` apart fore and aft; band and firing as in 3. And how far apart the
+   feet are fore and aft in double support on the flat walks.
 
     python docs/experiments/e5_why.py runs/chapter5
 """
@@ -37,10 +42,12 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import pyarrow.parquet as pq
 
+from sfl_brain.bodies.humanoid_table import FSR_X, HIP, SOLE, THIGH, TIBIA
 from sfl_brain.recording.recorded import read_events, read_series
 from sfl_brain.report.terrain import detector_of
 
@@ -57,6 +64,14 @@ PRESSED = 0.5  # a heel or toe sensor at or above this presses (the adaptation's
 SETTLED = 5.0  # s: a walk's contacts count toward the band from here (after the 4-s start ramp)
 FEET = ["body/feet/heel_l", "body/feet/toe_l", "body/feet/heel_r", "body/feet/toe_r"]
 SHARES = (0.1, 0.2, 0.3, 0.4)  # the lighter foot's share of the feet's summed pressure that counts as sharing
+#: the sensed state of 6. and 7.: the leg joints, the feet (pressures clipped at NOVELTY_PRESS N and scaled in 6.), the
+#: torso
+LEG = ("hip_roll", "hip_pitch", "knee", "ankle_pitch", "ankle_roll")  # from the torso down
+JOINTS = [f"body/joints/{joint}_{side}" for joint in LEG for side in "lr"]
+TORSO = ["body/torso/pitch", "body/torso/pitch_rate", "body/torso/roll", "body/torso/roll_rate"]
+STATE = JOINTS + FEET + TORSO
+NOVELTY_PRESS, PHASES, GAIT_HZ = 30.0, 8, 1.5
+SPACING = (0.03, 0.05)  # m: the feet's fore-and-aft distance from which the line between them counts (7.)
 
 
 def table(path: Path) -> list[dict]:
@@ -154,30 +169,43 @@ def fire_table(walks: list[tuple], signals: dict[str, list[np.ndarray]]) -> list
     return lines
 
 
-def feet_walks(runs: Path, tag: str) -> list[tuple]:
-    """Per walk of ``detectors{tag}_s0..2``: (case, times, the four feet signals, touch time or None, time from the
-    touch until the torso passed TORSO_DEG, stayed up, each sole's pitch in the world (deg, left and right))."""
+class Walk(NamedTuple):
+    """A walk of ``detectors{tag}_s0..2``: its case, times, the four feet signals, the touch time (None on the flat),
+    the time from the touch until the torso passed TORSO_DEG, whether it stayed up, each sole's pitch in the world
+    (deg, left and right), the sensed state (ticks x STATE) and its seed."""
+
+    case: str
+    times: np.ndarray
+    feet: tuple
+    t0: float | None
+    t10: float
+    up: bool
+    soles: tuple
+    state: np.ndarray
+    seed: int
+
+
+def feet_walks(runs: Path, tag: str) -> list[Walk]:
     walks = []
-    joints = [f"body/joints/{joint}_{side}" for side in "lr" for joint in CHAIN]
     for seed in range(3):
         run = runs / f"detectors{tag}_s{seed}"
         rrd = run / "recording.rrd"
-        series = read_series(rrd, [*FEET, "body/torso/pitch", *joints])
+        series = read_series(rrd, STATE)
         touched = read_events(rrd, ["body/events/terrain"])["body/events/terrain"]
         for t in table(run / "trials.parquet"):
             trial = int(t["trial"])
             if trial not in series[FEET[0]]:
                 continue
+            times = series[FEET[0]][trial].times
+            state = np.stack([np.asarray(series[name][trial].values, dtype=float) for name in STATE], axis=1)
+            column = {name: state[:, i] for i, name in enumerate(STATE)}
+            pitch = column["body/torso/pitch"]
             t0 = touched[trial].times[0] if trial in touched else None
-            pitch = series["body/torso/pitch"][trial]
-            tilted = (pitch.times >= (t0 or 0.0)) & (np.abs(pitch.values) > TORSO_DEG)
-            t10 = pitch.times[tilted][0] - t0 if t0 is not None and tilted.any() else np.inf
-            feet = tuple(np.asarray(series[f][trial].values, dtype=float) for f in FEET)
-            soles = tuple(
-                pitch.values + sum(np.asarray(series[f"body/joints/{joint}_{side}"][trial].values) for joint in CHAIN)
-                for side in "lr"
-            )
-            walks.append((t["condition"], series[FEET[0]][trial].times, feet, t0, t10, not t["m_fell"], soles))
+            tilted = (times >= (t0 or 0.0)) & (np.abs(pitch) > TORSO_DEG)
+            t10 = times[tilted][0] - t0 if t0 is not None and tilted.any() else np.inf
+            feet = tuple(column[f] for f in FEET)
+            soles = tuple(pitch + sum(column[f"body/joints/{joint}_{side}"] for joint in CHAIN) for side in "lr")
+            walks.append(Walk(t["condition"], times, feet, t0, t10, not t["m_fell"], soles, state, seed))
     return walks
 
 
@@ -207,16 +235,8 @@ def pitched_past(case: str, feet: tuple, soles: tuple) -> dict[str, np.ndarray]:
 
 
 def pitched_rows(walks: list[tuple]) -> list[str]:
-    signals = [pitched_past(case, feet, soles) for case, _, feet, *_, soles in walks]
+    signals = [pitched_past(w.case, w.feet, w.soles) for w in walks]
     return fire_table(walks, {name: [p[name] for p in signals] for name in signals[0]})
-
-
-#: the sensed state of 6.: the leg joints, the feet (pressures clipped at NOVELTY_PRESS N and scaled), the torso
-NOVELTY_JOINTS = [f"body/joints/{j}_{side}" for j in ("hip_pitch", "hip_roll", "knee", "ankle_pitch", "ankle_roll")
-                  for side in "lr"]  # fmt: skip
-TORSO = ["body/torso/pitch", "body/torso/pitch_rate", "body/torso/roll", "body/torso/roll_rate"]
-NOVELTY = NOVELTY_JOINTS + FEET + TORSO
-NOVELTY_PRESS, PHASES, GAIT_HZ = 30.0, 8, 1.5
 
 
 def gait_phase(hip: np.ndarray, dt: float) -> np.ndarray:
@@ -227,41 +247,80 @@ def gait_phase(hip: np.ndarray, dt: float) -> np.ndarray:
     return ((np.arctan2(-v, x) + np.pi) / (2 * np.pi) * PHASES).astype(int) % PHASES
 
 
-def novelty_rows(runs: Path, tag: str) -> list[str]:
-    walks, states = [], []
-    for seed in range(3):
-        run = runs / f"detectors{tag}_s{seed}"
-        rrd = run / "recording.rrd"
-        series = read_series(rrd, NOVELTY)
-        touched = read_events(rrd, ["body/events/terrain"])["body/events/terrain"]
-        for t in table(run / "trials.parquet"):
-            trial = int(t["trial"])
-            if t["condition"] not in ("flat", "flatdown", "up") or trial not in series[NOVELTY[0]]:
-                continue
-            times = series[NOVELTY[0]][trial].times
-            x = np.stack([np.asarray(series[name][trial].values, dtype=float) for name in NOVELTY], axis=1)
-            feet = slice(len(NOVELTY_JOINTS), len(NOVELTY_JOINTS) + len(FEET))
-            x[:, feet] = np.minimum(x[:, feet], NOVELTY_PRESS) / 10.0
-            t0 = touched[trial].times[0] if trial in touched else None
-            pitch = x[:, NOVELTY.index("body/torso/pitch")]
-            tilted = (times >= (t0 or 0.0)) & (np.abs(pitch) > TORSO_DEG)
-            t10 = times[tilted][0] - t0 if t0 is not None and tilted.any() else np.inf
-            walks.append((t["condition"], times, None, t0, t10, not t["m_fell"]))
-            states.append((seed, x, gait_phase(x[:, 0], float(np.median(np.diff(times))))))
-    signals = []
-    for (case, times, *_), (seed, x, phase) in zip(walks, states, strict=True):
-        others = [(w, st) for w, st in zip(walks, states, strict=True) if w[0] == "flat" and w[5] and st[0] != seed]
-        distance = np.zeros(len(times))
+def novelty_rows(walks: list[Walk]) -> list[str]:
+    walks = [w for w in walks if w.case in ("flat", "flatdown", "up")]
+    states = []
+    for w in walks:
+        x = w.state.copy()
+        feet = slice(len(JOINTS), len(JOINTS) + len(FEET))
+        x[:, feet] = np.minimum(x[:, feet], NOVELTY_PRESS) / 10.0
+        states.append((x, gait_phase(x[:, STATE.index("body/joints/hip_pitch_l")], float(np.median(np.diff(w.times))))))
+    models = {}  # per seed left out, per phase: the flat walks' mean and inverse covariance
+    for seed in {w.seed for w in walks}:
+        flat = [(w, st) for w, st in zip(walks, states, strict=True) if w.case == "flat" and w.up and w.seed != seed]
         for b in range(PHASES):
-            rows = np.concatenate([st[1][(st[2] == b) & (w[1] >= SETTLED)] for w, st in others])
+            rows = np.concatenate([x[(phase == b) & (w.times >= SETTLED)] for w, (x, phase) in flat])
             cov = np.cov(rows.T)
             cov += 1e-3 * np.trace(cov) / len(cov) * np.eye(len(cov))  # a little ridge: some signals hardly move
-            here = phase == b
-            d = x[here] - rows.mean(axis=0)
-            distance[here] = np.sqrt(np.einsum("ij,jk,ik->i", d, np.linalg.inv(cov), d))
-        distance[times < SETTLED] = 0.0
-        signals.append(np.convolve(distance, np.ones(3) / 3)[: len(times)])
+            models[seed, b] = rows.mean(axis=0), np.linalg.inv(cov)
+    signals = []
+    for w, (x, phase) in zip(walks, states, strict=True):
+        distance = np.zeros(len(w.times))
+        for b in range(PHASES):
+            mean, inverse = models[w.seed, b]
+            d = x[phase == b] - mean
+            distance[phase == b] = np.sqrt(np.einsum("ij,jk,ik->i", d, inverse, d))
+        distance[w.times < SETTLED] = 0.0
+        signals.append(np.convolve(distance, np.ones(3) / 3)[: len(w.times)])
     return fire_table(walks, {"novelty against the flat walks (other seeds)": signals})
+
+
+def _turn(axis: int, angle: np.ndarray) -> np.ndarray:
+    """(ticks, 3, 3): rotations by ``angle`` (rad) about x (0) or y (1)."""
+    c, s, o, z = np.cos(angle), np.sin(angle), np.ones_like(angle), np.zeros_like(angle)
+    rows = ([o, z, z], [z, c, -s], [z, s, c]) if axis == 0 else ([c, z, s], [z, o, z], [-s, z, c])
+    return np.stack([np.stack(row, axis=-1) for row in rows], axis=-2)
+
+
+def pressed_points(w: Walk) -> list[np.ndarray]:
+    """Per foot (left, right), each tick's pressed point relative to the torso's origin in a frame level with the
+    ground's normal and the torso's heading (m; heel, toe or their middle; NaN when the foot presses neither)."""
+    column = {name: np.radians(w.state[:, i]) for i, name in enumerate(STATE)}
+    points = []
+    for side, (heel, toe) in zip("lr", (w.feet[:2], w.feet[2:]), strict=True):
+        q = {joint: column[f"body/joints/{joint}_{side}"] for joint in LEG}
+        turn = _turn(1, column["body/torso/pitch"]) @ _turn(0, column["body/torso/roll"])
+        at = turn @ np.array([HIP[0], HIP[1] if side == "l" else -HIP[1], HIP[2]])
+        turn = turn @ _turn(0, q["hip_roll"]) @ _turn(1, q["hip_pitch"])
+        at = at + turn @ np.array([0.0, 0.0, -THIGH])
+        turn = turn @ _turn(1, q["knee"])
+        at = at + turn @ np.array([0.0, 0.0, -TIBIA])
+        turn = turn @ _turn(1, q["ankle_pitch"]) @ _turn(0, q["ankle_roll"])
+        toe_at, heel_at = (at + turn @ np.array([x, 0.0, -SOLE]) for x in FSR_X)
+        on_heel, on_toe = (np.asarray(heel) >= PRESSED)[:, None], (np.asarray(toe) >= PRESSED)[:, None]
+        count = on_heel.astype(float) + on_toe
+        point = (heel_at * on_heel + toe_at * on_toe) / np.where(count == 0, 1.0, count)
+        point[count[:, 0] == 0] = np.nan
+        points.append(point)
+    return points
+
+
+def feet_line_rows(walks: list[Walk]) -> list[str]:
+    lines, signals, apart = [], {f"feet >= {d * 100:g} cm apart": [] for d in SPACING}, []
+    for w in walks:
+        left, right = pressed_points(w)
+        ahead = left - right  # the left foot's point from the right's
+        fore = np.abs(ahead[:, 0])
+        slope = np.degrees(np.arctan2(np.sign(ahead[:, 0]) * ahead[:, 2], fore))  # + = the front foot higher
+        both = np.isfinite(slope)
+        if w.case == "flat" and w.up:
+            apart.append(fore[both & (w.times >= SETTLED)])
+        for spacing, values in zip(SPACING, signals.values(), strict=True):
+            values.append(np.where(both & (fore >= spacing), np.abs(slope - OLD_SLOPE[w.case]), 0.0))
+    lines.append("the feet's fore-and-aft distance in double support on the flat walks that stayed up, from 5 s on: "
+                 "quartiles " + ", ".join(f"{q * 100:.1f}" for q in np.percentile(np.concatenate(apart), [25, 50, 75]))
+                 + " cm")  # fmt: skip
+    return lines + fire_table(walks, signals)
 
 
 def downhill_without(runs: Path, tag: str) -> list[str]:
@@ -319,7 +378,10 @@ def main(argv: list[str]) -> int:
         print("\n".join(pitched_rows(walks)))
         print("\nthe sensed state's distance from the flat walks' at the same gait phase (walks that start on the")
         print("flat; up -> flat and down -> flat start on a ramp and are left out):")
-        print("\n".join(novelty_rows(runs, tag)))
+        print("\n".join(novelty_rows(walks)))
+        print("\nthe slope of the line between the feet's pressed points against the ground walked before the edge,")
+        print("deg (fires, latency and early as above):")
+        print("\n".join(feet_line_rows(walks)))
         print("\ndownhill -> flat without switching:")
         print("\n".join(downhill_without(runs, tag)), "\n")
     return 0
