@@ -104,16 +104,16 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
             bodies["b-numba", engine] = new_body(engine, compiled)
     wall: dict[tuple, list[float]] = {key: [] for key in bodies}
     cpu: dict[tuple, list[float]] = {key: [] for key in bodies}
+
+    def timed(key: tuple) -> tuple[float, float]:
+        item, engine = key
+        if item == "a":
+            return physics_only(bodies[key])
+        if item == "a-walk":
+            return replayed(bodies[key], commands[engine])
+        return whole_trial(bodies[key])
+
     try:
-
-        def timed(key: tuple) -> tuple[float, float]:
-            item, engine = key
-            if item == "a":
-                return physics_only(bodies[key])
-            if item == "a-walk":
-                return replayed(bodies[key], commands[engine])
-            return whole_trial(bodies[key])
-
         for key in bodies:  # warm-up: worlds built, caches filled
             timed(key)
         order, shuffle = list(bodies), np.random.default_rng(0).shuffle
