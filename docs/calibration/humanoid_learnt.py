@@ -9,8 +9,8 @@ as ``docs/experiments/chapter5.sh`` names them); for each seed N found there, th
 (``summary.json`` ``best.neuron_point``, as ``protocol.best_of`` does) of the terrain ``FROM`` and, given ``TO``,
 switches to ``TO``'s best neuron when the feet sense the change (``e5_switch.yaml``'s switch: ``foot_slope``, band 1.5,
 gradual). ``CASE`` is a ground, a finish line and a time-out (``CASES``). ``--trial`` sets the controller's trial
-parameters (default ``CH5``: ``e5_learn.yaml``'s conditions), ``--set`` a circuit value by key path
-(``ankle_adaptation.rate=10``). Prints per seed the walks that reach the line, and each walk's end (S/f, time s,
+parameters (default ``CH5``: ``e5_learn.yaml``'s conditions; a neuron's own value too, ``--trial gain_pitch=0.8``
+walks the ``FROM`` neuron with that pitch gain), ``--set`` a circuit value by key path (``ankle_adaptation.rate=10``). Prints per seed the walks that reach the line, and each walk's end (S/f, time s,
 distance m). A calibration (no bus, no records), not an experiment: the experiments are the scenarios.
 """
 
@@ -73,7 +73,8 @@ def main() -> None:
     parser.add_argument("--trial", action="append", default=[], metavar="KEY=VALUE")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     args = parser.parse_args()
-    trial = dict(CH5, **{k: yaml.safe_load(v) for k, v in (x.split("=", 1) for x in args.trial)})
+    given = {k: yaml.safe_load(v) for k, v in (x.split("=", 1) for x in args.trial)}
+    trial = dict(CH5, **given)
     overrides = {k: yaml.safe_load(v) for k, v in (x.split("=", 1) for x in args.set)}
     body_params, finish, duration = CASES[args.case]
     seeds = sorted(int(p.name.rsplit("_s", 1)[1]) for p in args.runs.glob(f"{args.start}_adaptive_s*"))
@@ -85,7 +86,7 @@ def main() -> None:
     total = 0
     print(f"{args.case}: {args.start}{' -> ' + args.to if args.to else ''}; trial {trial}; circuit {overrides or 'as shipped'}")
     for seed in seeds:
-        controller = dict(trial, **best(args.runs, args.start, seed, args.point))
+        controller = {**trial, **best(args.runs, args.start, seed, args.point), **given}  # what --trial gives wins
         if args.to:
             nxt = best(args.runs, args.to, seed, args.point)
             controller.update(terrain_switch="gradual", switch_detector="foot_slope", switch_band=1.5,
