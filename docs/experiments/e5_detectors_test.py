@@ -2,9 +2,10 @@
 McNemar's exact test over the walks that changed terrain, Holm-adjusted over the detectors compared; and the false
 alarms of the feet's slope against the band's over every walk.
 
-    python docs/experiments/e5_detectors_test.py [OUT [NAME]]  # OUT: chapter5.sh's run folder (default runs/chapter5)
+    python docs/experiments/e5_detectors_test.py [OUT [NAME [SEEDS]]]  # OUT: chapter5.sh's run folder (default runs/chapter5)
 
-Reads OUT/NAME_s0..s2 (NAME: detectors, the default, or detectors_wins for the walks of best_by wins) (``scenarios/e5_detectors.yaml``, every detector watched on every walk, none switching)
+Reads OUT/NAME_sN for the seeds N in SEEDS (default 0,1,2; 3,4,5,6,7 for chapter5_heldout.sh's) (NAME: detectors,
+the default, or detectors_wins for the walks of best_by wins) (``scenarios/e5_detectors.yaml``, every detector watched on every walk, none switching)
 with the same rows and the same "in time" as the ``detection`` section of ``sfl report``."""
 
 import sys
@@ -21,7 +22,9 @@ BAND = "torso"  # the thesis's detector (L1759)
 def main() -> None:
     out = Path(sys.argv[1] if len(sys.argv) > 1 else "runs/chapter5")
     name = sys.argv[2] if len(sys.argv) > 2 else "detectors"  # detectors_wins: the walks of best_by wins
-    runs = [out / f"{name}_s{seed}" for seed in (0, 1, 2)]
+    seeds = [int(x) for x in sys.argv[3].split(",")] if len(sys.argv) > 3 else [0, 1, 2]
+    runs = [out / f"{name}_s{seed}" for seed in seeds]
+    print(f"{name}, seeds {', '.join(map(str, seeds))}")
     scenario = yaml.safe_load((runs[0] / "scenario.yaml").read_text())
     analysis = next(a for a in scenario["protocol"]["analyses"] if a["kind"] == "detection")
     limit, level = float(analysis.get("latency", 0.5)), float(analysis.get("pitch_below", -5.0))
