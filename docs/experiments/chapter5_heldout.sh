@@ -5,7 +5,7 @@
 # second stage (the switching walks, the switch on flat ground, the uphill run-up, the detectors; both neuron
 # choices) on SEEDS (default 3 4 5 6 7) into the same OUT as chapter5.sh, and writes their pages into
 # docs/results/chapter5/heldout/ (the thesis's neuron), heldout/wins/ (the most-winning one) and heldout/learn/.
-# About 25 minutes on 2 cores.
+# About 20 minutes on 2 cores.
 #   bash docs/experiments/chapter5_heldout.sh
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -58,3 +58,8 @@ for name in switch switch_flat uphill_runup detectors; do
   sfl report "${wins[@]}" --out "$RESULTS/wins"
 done
 sfl report "${learn[@]}" --out "$RESULTS/learn"
+# the same tests as chapter5.sh's, over these seeds: the detectors against the torso band, and the two neuron choices
+SEEDLIST=$(echo $SEEDS | tr ' ' ',')
+python docs/experiments/e5_detectors_test.py "$OUT" detectors "$SEEDLIST"
+python docs/experiments/e5_detectors_test.py "$OUT" detectors_wins "$SEEDLIST"
+python docs/experiments/e5_best_by_test.py "$OUT" "$SEEDLIST"
