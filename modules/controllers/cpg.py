@@ -67,8 +67,10 @@ caption; separate maps for flat, 10 deg up and 10 deg down, §5.7; switching whi
   ("above", "below"; "outside": out of the measured band either way) ``switch_threshold`` (rad), or a threshold the
   walk itself measures: ``switch_band`` k, the input's mean +- k x its half range over the module parameter
   ``switch_measure`` s from ``terrain_switch_after`` (§7.17's rule: mean +- 1.5 x half range of the gait before the
-  terrain changes; detection starts once it is known). The thesis detects "when the
-  torso reaches previously defined threshold" (L1759): a level, not a rising edge. On logged trials the switch is a
+  terrain changes; detection starts once it is known). ``switch_detector`` picks what is watched (terrain.py
+  ``DETECTORS``); ``foot_slope_floor`` (rad, >= 0) replaces the feet's slope detector's narrowest half band
+  (terrain.py ``FLOORS``: 0.035 rad) this trial, for the switch and for the module's ``terrain_watch``. The thesis
+  detects "when the torso reaches previously defined threshold" (L1759): a level, not a rising edge. On logged trials the switch is a
   telemetry event ``events/terrain_switch``; the network keeps it (``network.terrain_switch_events``). On a logged
   trial the threshold (``terrain_switch/band_low``, ``band_high``) and the switch (``terrain_switch/at``) are also
   series in degrees, to be drawn over the body's torso pitch.
@@ -122,6 +124,7 @@ TRIAL_PARAMS = (
     "ankle_adaptation",
     "start_ramp",
     "switch_detector",
+    "foot_slope_floor",
 )
 #: the group gain multipliers a trial may set (ch. 5's w1, w2): trial parameter -> the circuit's gain group
 GAIN_PARAMS = {"gain_pitch": "pitch", "gain_roll": "roll", "next_gain_pitch": "pitch", "next_gain_roll": "roll"}
@@ -463,6 +466,7 @@ class CPGController(Controller):
                 network.set_gain_multiplier(GAIN_PARAMS[name], float(params[name]))
         if "posture_gain" in params:  # the torso held near 10 deg (L1764)
             network.set_posture_gain(float(params["posture_gain"]))
+        floors = {"foot_slope": float(params["foot_slope_floor"])} if "foot_slope_floor" in params else None
         mode = params.get("terrain_switch", "off")
         if mode != "off":  # §5.8: another condition's parameters when the torso pitch says the terrain changed
             p = self.params
@@ -479,11 +483,12 @@ class CPGController(Controller):
                 sigma_joints=self._pattern_joints,
                 band=(float(params["switch_band"]), p.switch_measure) if "switch_band" in params else None,
                 detector=params.get("switch_detector", "torso"),
+                floors=floors,
             )
         if self.params.terrain_watch:  # detectors watched without switching (issue 29)
             p = self.params
             network.watch_terrain(
-                p.terrain_watch, (p.watch_band, p.switch_measure), p.terrain_switch_after, p.watched_input
+                p.terrain_watch, (p.watch_band, p.switch_measure), p.terrain_switch_after, p.watched_input, floors
             )
         self._terrain_log = [] if log and network.ankle_adaptation else None
         every = rates_of(self.telemetry).signal_every(self._control_dt) if log else 1
@@ -664,6 +669,8 @@ def _check_trial_value(
         raise ValueError(f"{name}: expected a finite number; got {value!r}")
     if name == "switch_band" and value < 0:
         raise ValueError(f"switch_band: expected k >= 0 (the threshold: mean +- k x half range); got {value!r}")
+    if name == "foot_slope_floor" and not 0 <= value <= math.pi / 2:
+        raise ValueError(f"foot_slope_floor: expected a half band in rad within [0, pi/2]; got {value!r}")
     if name in ("sigma_s", "sigma_f", "next_sigma_s") and value < 0:
         raise ValueError(f"{name}: expected a number >= 0 (Table 4.1: [0, 5]); got {value!r}")
     if name in GAIN_PARAMS:

@@ -218,12 +218,14 @@ def make_detector(network, name: str, torso_input: str) -> Detector:
 class Watch:
     """A detector's band, measured on the walk (or given), and when each copy first left it (see the module
     docstring). ``band`` = (k, seconds): measured over ``seconds`` from ``after``, then watched; ``threshold``: a given
-    level (one column), watched from ``after``."""
+    level (one column), watched from ``after``. ``floor``: the band's narrowest half (default the detector's
+    ``FLOORS``)."""
 
-    def __init__(self, detector: Detector, when: str, after: float, band=None, threshold=None) -> None:
+    def __init__(self, detector: Detector, when: str, after: float, band=None, threshold=None, floor=None) -> None:
         b = detector.network.batch
         self.detector, self.when, self.above = detector, when, when == "above"
         self.band = band
+        self.floor = FLOORS[detector.name] if floor is None else float(floor)  # the narrowest half band
         self.fired = np.zeros(b, dtype=bool)
         self.bins = PHASES if isinstance(detector, PhasePitch) else 1
         if band is not None:
@@ -261,7 +263,7 @@ class Watch:
                 self.total[ok, at] += value[ok]
                 self.count[ok, at] += 1
             if time + 1e-9 >= self.measured_to - dt:  # the window's last tick: the band is known
-                k, floor = self.band[0], FLOORS[detector.name]
+                k, floor = self.band[0], self.floor
                 mean = self.total / np.maximum(self.count, 1)
                 half = np.maximum(k * (self.high - self.low) / 2, floor)
                 unseen = self.count == 0  # a phase never seen: never fires there
@@ -484,6 +486,7 @@ class TerrainSwitching:
         band: tuple[float, float] | None = None,
         theta_mlr: float | None = None,
         detector: str = "torso",
+        floors: dict[str, float] | None = None,
     ) -> None:
         """Switch parameters once this trial when the terrain changes (§5.8, L1759-1766): from ``after`` s on, the first
         tick whose ``input`` (e.g. the torso pitch, rad) is at or ``when`` ("above", "below") ``threshold`` starts
@@ -496,10 +499,12 @@ class TerrainSwitching:
         starts once it is known.
         ``theta_mlr`` (None: unchanged) moves the descending theta_MLR (4.9) of ``sigma_joints`` the same way.
         ``detector`` (terrain.py ``DETECTORS``): what is watched, ``input`` itself ("torso", the thesis's) or another
-        sensed signal (issue 29), whose band is measured the same way; "time" fires at ``after``.
+        sensed signal (issue 29), whose band is measured the same way; "time" fires at ``after``. ``floors``
+        (detector -> its unit) replaces a detector's narrowest half band (``FLOORS``) this trial.
         ``reset`` disarms it; the switches are in ``terrain_switch_events``."""
         band, threshold = self._check_terrain_switch(input, threshold, when, mode, seconds, gains, band, detector)
-        watch = Watch(make_detector(self, detector, input), when, after, band=band, threshold=threshold)
+        floor = (floors or {}).get(detector)
+        watch = Watch(make_detector(self, detector, input), when, after, band=band, threshold=threshold, floor=floor)
         self._terrain = TerrainSwitch(self, watch, input, mode, seconds, gains or {}, sigma_s, sigma_joints, theta_mlr)
         self._terrain_detector = detector
         self.terrain_threshold = self._terrain.threshold()  # a given threshold: known from the start
@@ -534,11 +539,17 @@ class TerrainSwitching:
             raise ValueError("switch_when 'outside': expected a band (switch_band) to leave; got a threshold")
         return band, threshold
 
-    def watch_terrain(self, detectors, band: tuple[float, float], after: float, torso_input: str = "torso_pitch"):
+    def watch_terrain(
+        self, detectors, band: tuple[float, float], after: float, torso_input: str = "torso_pitch", floors=None
+    ):
         """Watch ``detectors`` (terrain.py ``DETECTORS``) this trial without switching: each measures its band (k,
         seconds) from ``after`` s and records when it first leaves it (``detector_events``), to compare detectors on
-        the same walk (issue 29). ``reset`` stops watching."""
-        watches = [Watch(make_detector(self, name, torso_input), "outside", after, band=band) for name in detectors]
+        the same walk (issue 29). ``floors`` as ``arm_terrain_switch``'s. ``reset`` stops watching."""
+        floors = floors or {}
+        watches = [
+            Watch(make_detector(self, name, torso_input), "outside", after, band=band, floor=floors.get(name))
+            for name in detectors
+        ]
         self._watcher = Watcher(watches) if watches else None
 
     @property

@@ -190,6 +190,23 @@ def test_the_foot_slope_detector_fires_within_its_latency_on_a_scripted_ramp_and
     assert "torso" not in watched  # the torso's pitch did not change: the thesis's detector cannot see this
 
 
+@pytest.mark.parametrize("floor", [0.0524, 0.2])
+def test_the_trials_foot_slope_floor_is_the_bands_narrowest_half_for_the_switch_and_the_watch(floor):
+    c = controller(terrain_watch=["foot_slope"])
+    params = {**ADAPT, "terrain_switch": "at_once", "switch_detector": "foot_slope", "switch_band": 1.5,
+              "switch_when": "outside", "next_gain_pitch": 1.0, "foot_slope_floor": floor}  # fmt: skip
+    reads, _ = start(c, params=params)
+    scripted_ramp(c, reads, ramp_at=6.0, seconds=7.0)
+    watched = {e.detector: e for e in c.network.detector_events}
+    if floor > SLOPE:  # wider than the ramp's 10 deg: the ramp stays inside it
+        assert c.network.terrain_switch_events == [] and watched == {}
+        return
+    [event] = c.network.terrain_switch_events
+    assert 6.0 <= event.time <= 6.0 + 0.5
+    assert event.threshold[1] - event.threshold[0] == pytest.approx(2 * floor)  # the jitter's range is narrower
+    assert watched["foot_slope"].time == event.time
+
+
 def test_a_detector_needs_what_it_reads_and_a_measured_band():
     c = controller()
     for params, message in [
@@ -203,6 +220,7 @@ def test_a_detector_needs_what_it_reads_and_a_measured_band():
         ({"ankle_adaptation": "onn"},
          "ankle_adaptation: expected one of ['on', 'off']; got 'onn' (did you mean 'on'?)"),
         ({"start_ramp": -1.0}, "start_ramp: expected a time in s >= 0; got -1.0"),
+        ({"foot_slope_floor": -0.1}, "foot_slope_floor: expected a half band in rad within [0, pi/2]; got -0.1"),
         ({"ankle_adaptation": "on", "start_slope_deg": 10.0},
          "start_slope_deg: expected none with ankle_adaptation 'on' (the adaptation senses the slope the trial starts "
          "on); got both"),
