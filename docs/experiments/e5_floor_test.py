@@ -37,8 +37,8 @@ def walked(folder: Path) -> dict[tuple[str, int], bool]:
 
 
 def feet(folder: Path) -> list[dict]:
-    """Per logged walk of one detector run, in trial order: its case and when the feet fired, met the new ground and
-    pitched past the limit (s of the trial or None), with the scenario's latency and pitch limit."""
+    """Per logged walk of one detector run, by trial: its case and when the feet fired, met the new ground and pitched
+    past the limit (s of the trial or None), with the scenario's latency."""
     scenario = yaml.safe_load((folder / "scenario.yaml").read_text())
     analysis = next(a for a in scenario["protocol"]["analyses"] if a["kind"] == "detection")
     rows = detection_rows(Trials(scenario, [folder]), [folder], analysis)
@@ -48,7 +48,7 @@ def feet(folder: Path) -> list[dict]:
     if found:
         walks = found
     limit = float(analysis.get("latency", 0.5))
-    return [dict(w, limit=limit) for w in walks]
+    return sorted((dict(w, limit=limit) for w in walks), key=lambda w: w["trial"])  # runs finish trials in any order
 
 
 def early(w: dict) -> bool:
@@ -90,7 +90,7 @@ def main() -> None:
         walks = {c: [] for c in CASES}
         for seed in seeds:
             a, b = feet(out / f"detectors{by}_s{seed}"), feet(out / f"detectors_{tag}{by}_s{seed}")
-            if [w["condition"] for w in a] != [w["condition"] for w in b]:
+            if [(w["trial"], w["condition"]) for w in a] != [(w["trial"], w["condition"]) for w in b]:
                 sys.exit(f"detectors{by} seed {seed}: the two runs hold different walks")
             for x, y in zip(a, b, strict=True):
                 walks[x["condition"]].append((x, y))
