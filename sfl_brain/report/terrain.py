@@ -66,8 +66,8 @@ def detector_of(text: str) -> str:
 
 def detection_rows(t: Trials, run_dirs: list[Path], analysis: dict) -> list[dict]:
     """One row per logged trial and watched detector: trial, condition, detector, fired (s of the trial or None),
-    reached (when a foot met the next ground, or None), pitch (when the torso pitch first fell below ``pitch_below`` after the
-    change, or None)."""
+    reached (when a foot met the next ground, or None), pitch (when the torso pitch first fell below ``pitch_below``
+    after the change, or None)."""
     module = analysis.get("module", "controller")
     events = [f"{module}/events/detector", "body/events/terrain"]
     out = []
