@@ -44,7 +44,9 @@ E, F = 0, 1
 DETECTORS = ("torso", "pitch_rate", "phase_pitch", "foot_slope", "ankle_error", "time")
 #: the narrowest half band of each detector (its unit): below it the measured band would be the detector's noise.
 #: Chosen here (issue 29): foot_slope 0.035 rad (2 deg: the estimate's spread walking the flat, 0.9 deg s.d. per
-#: stance, calibrated by docs/calibration/humanoid_terrain.py); the others 0 (the thesis's rule as it stands)
+#: stance, calibrated by docs/calibration/humanoid_terrain.py); the others 0 (the thesis's rule as it stands). A trial's
+#: ``foot_slope_floor`` replaces the feet's: 3 deg ends nearly every false alarm on chapter 5's flat walks but detects
+#: the uphill later with the thesis's neuron (docs/experiments/chapter5_floor.sh; docs/results/chapter5.md)
 FLOORS = {"torso": 0.0, "pitch_rate": 0.0, "phase_pitch": 0.0, "foot_slope": 0.035, "ankle_error": 0.0, "time": 0.0}
 PHASES = 8  # phase_pitch: bins of the gait cycle
 
