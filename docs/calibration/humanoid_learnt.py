@@ -10,8 +10,9 @@ as ``docs/experiments/chapter5.sh`` names them); for each seed N found there, th
 switches to ``TO``'s best neuron when the feet sense the change (``e5_switch.yaml``'s switch: ``foot_slope``, band 1.5,
 gradual). ``CASE`` is a ground, a finish line and a time-out (``CASES``). ``--trial`` sets the controller's trial
 parameters (default ``CH5``: ``e5_learn.yaml``'s conditions; a neuron's own value too, ``--trial gain_pitch=0.8``
-walks the ``FROM`` neuron with that pitch gain), ``--set`` a circuit value by key path (``ankle_adaptation.rate=10``). Prints per seed the walks that reach the line, and each walk's end (S/f, time s,
-distance m). A calibration (no bus, no records), not an experiment: the experiments are the scenarios.
+walks the ``FROM`` neuron with that pitch gain), ``--set`` a circuit value by key path (``ankle_adaptation.rate=10``).
+Prints per seed the walks that reach the line, and each walk's end (S/f, time s, distance m). A calibration (no bus,
+no records), not an experiment: the experiments are the scenarios.
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# Issue 29: the feet's slope detector with a wider floor. Its band (mean +- 1.5 x half range over 2 s, measured on each
-# walk) is nearly always its floor, +-2 deg (terrain.FLOORS: 0.035 rad, about 2.2 s.d. of the estimate per stance walking
-# the flat). A walk looks about 30 times (stances) before the ramp, so at 2.2 s.d. a flat walk raises a false alarm more
-# often than not; about 3 s.d. (3 deg, 0.0524 rad) keeps it near 5% a walk. This runs chapter 5's switching walks and
+# Issue 29: the feet's slope detector with a wider floor. Its band (mean +- 1.5 x half range over 2 s, measured on
+# each walk) is nearly always its floor, +-2 deg (terrain.FLOORS: 0.035 rad, about 2.2 s.d. of the estimate per stance
+# walking the flat). A walk looks about 30 times (stances) before the ramp, so at 2.2 s.d. a flat walk raises a false
+# alarm more often than not; 3 deg (3.3 s.d., 0.0524 rad) keeps it below 5% a walk. This runs chapter 5's switching walks and
 # detector walks (scenarios/e5_switch.yaml, e5_detectors.yaml; both neuron choices) with controller.foot_slope_floor =
 # FLOOR beside the same walks at the shipped floor (chapter5.sh's and chapter5_heldout.sh's runs, made here if missing),
 # on SEEDS (default 0-12: 0-2 chapter5.sh's, 3-7 chapter5_heldout.sh's, 8-12 new), and compares them start by start
@@ -43,9 +43,9 @@ for seed in $SEEDS; do
     BY_TAG=$([ $by = wins ] && echo _wins || true)
     BY="--set protocol.best_by=$by"
     for name in switch detectors; do
-      once "$OUT/${name}${BY_TAG}_s$seed" sfl run "scenarios/e5_${name}.yaml" --set seed=$seed $BY $FLAT $UPHILL $DOWNHILL
-      once "$OUT/${name}_${TAG}${BY_TAG}_s$seed" sfl run "scenarios/e5_${name}.yaml" --set seed=$seed $BY $FLAT $UPHILL \
-        $DOWNHILL $WIDER
+      SCENARIO="scenarios/e5_${name}.yaml"
+      once "$OUT/${name}${BY_TAG}_s$seed" sfl run "$SCENARIO" --set seed=$seed $BY $FLAT $UPHILL $DOWNHILL
+      once "$OUT/${name}_${TAG}${BY_TAG}_s$seed" sfl run "$SCENARIO" --set seed=$seed $BY $FLAT $UPHILL $DOWNHILL $WIDER
     done
   done
 done

@@ -5,8 +5,9 @@
 For each walk that issue 29's goals count (E5.3's flat -> uphill and downhill -> flat with switching, the uphill
 neuron from a flat run-up with its ankles adapted), the walks of ``best_by reward`` (the thesis's neuron nearest the
 highest-reward trial, L1584: OUT/NAME_sN) against those of ``best_by wins`` (the success neuron that won the most
-successes: OUT/NAME_wins_sN), seeds SEEDS (default 0,1,2; 3,4,5,6,7 for chapter5_heldout.sh's): the same seed's conditions run draws the same start for the same repeat, so
-each start pairs. McNemar's exact test per walk, Holm-adjusted over the walks compared."""
+successes: OUT/NAME_wins_sN), seeds SEEDS (default 0,1,2; 3,4,5,6,7 for chapter5_heldout.sh's): the same seed's
+conditions run draws the same start for the same repeat, so each start pairs. McNemar's exact test per walk,
+Holm-adjusted over the walks compared."""
 
 import sys
 from pathlib import Path

@@ -2,11 +2,12 @@
 McNemar's exact test over the walks that changed terrain, Holm-adjusted over the detectors compared; and the false
 alarms of the feet's slope against the band's over every walk.
 
-    python docs/experiments/e5_detectors_test.py [OUT [NAME [SEEDS]]]  # OUT: chapter5.sh's run folder (default runs/chapter5)
+    python docs/experiments/e5_detectors_test.py [OUT [NAME [SEEDS]]]  # OUT: chapter5.sh's runs (runs/chapter5)
 
 Reads OUT/NAME_sN for the seeds N in SEEDS (default 0,1,2; 3,4,5,6,7 for chapter5_heldout.sh's) (NAME: detectors,
-the default, or detectors_wins for the walks of best_by wins) (``scenarios/e5_detectors.yaml``, every detector watched on every walk, none switching)
-with the same rows and the same "in time" as the ``detection`` section of ``sfl report``."""
+the default, or detectors_wins for the walks of best_by wins) (``scenarios/e5_detectors.yaml``, every detector
+watched on every walk, none switching) with the same rows and the same "in time" as the ``detection`` section of
+``sfl report``."""
 
 import sys
 from pathlib import Path

@@ -70,10 +70,10 @@ caption; separate maps for flat, 10 deg up and 10 deg down, §5.7; switching whi
   terrain changes; detection starts once it is known). ``switch_detector`` picks what is watched (terrain.py
   ``DETECTORS``); ``foot_slope_floor`` (rad, >= 0) replaces the feet's slope detector's narrowest half band
   (terrain.py ``FLOORS``: 0.035 rad) this trial, for the switch and for the module's ``terrain_watch``. The thesis
-  detects "when the torso reaches previously defined threshold" (L1759): a level, not a rising edge. On logged trials the switch is a
-  telemetry event ``events/terrain_switch``; the network keeps it (``network.terrain_switch_events``). On a logged
-  trial the threshold (``terrain_switch/band_low``, ``band_high``) and the switch (``terrain_switch/at``) are also
-  series in degrees, to be drawn over the body's torso pitch.
+  detects "when the torso reaches previously defined threshold" (L1759): a level, not a rising edge. On logged
+  trials the switch is a telemetry event ``events/terrain_switch``; the network keeps it
+  (``network.terrain_switch_events``). On a logged trial the threshold (``terrain_switch/band_low``, ``band_high``)
+  and the switch (``terrain_switch/at``) are also series in degrees, to be drawn over the body's torso pitch.
 
 On logged trials every neuron is shown on ``sim_time``: per joint and side (E, F) RG V and q, PF and MN, then the
 sensory neurons (``CPGNetwork.neuron_names``).
@@ -436,6 +436,13 @@ class CPGController(Controller):
         for name, value in params.items():
             _check_trial_value(name, value, self.circuit, list(self.preset_index), self.params.watched_input)
         _check_terrain_switch(params)
+        if "foot_slope_floor" in params:
+            switched = params.get("terrain_switch", "off") != "off" and params.get("switch_detector") == "foot_slope"
+            if not switched and "foot_slope" not in self.params.terrain_watch:
+                raise ValueError(
+                    "foot_slope_floor: expected the feet's slope detector watched this trial (switch_detector "
+                    "foot_slope, or foot_slope in the module's terrain_watch); it is not"
+                )
         msg = self.trial  # the base sets it before configure (None when configured by hand, e.g. in a test)
         self._control_dt = msg.dt if msg is not None else 0.01
         log = msg is not None and msg.log and self.telemetry is not None

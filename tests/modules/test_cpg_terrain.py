@@ -221,6 +221,10 @@ def test_a_detector_needs_what_it_reads_and_a_measured_band():
          "ankle_adaptation: expected one of ['on', 'off']; got 'onn' (did you mean 'on'?)"),
         ({"start_ramp": -1.0}, "start_ramp: expected a time in s >= 0; got -1.0"),
         ({"foot_slope_floor": -0.1}, "foot_slope_floor: expected a half band in rad within [0, pi/2]; got -0.1"),
+        ({"foot_slope_floor": 0.05, "terrain_switch": "at_once", "switch_detector": "torso", "switch_band": 1.5,
+          "switch_when": "outside", "next_gain_pitch": 1.0},
+         "foot_slope_floor: expected the feet's slope detector watched this trial (switch_detector foot_slope, or "
+         "foot_slope in the module's terrain_watch); it is not"),
         ({"ankle_adaptation": "on", "start_slope_deg": 10.0},
          "start_slope_deg: expected none with ankle_adaptation 'on' (the adaptation senses the slope the trial starts "
          "on); got both"),
