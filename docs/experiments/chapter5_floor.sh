@@ -4,8 +4,9 @@
 # walking the flat). A walk looks about 30 times (stances) before the ramp, so at 2.2 s.d. a flat walk raises a false
 # alarm more often than not; 3 deg (3.3 s.d., 0.0524 rad) keeps it below 5% a walk. This runs chapter 5's switching
 # walks and detector walks (scenarios/e5_switch.yaml, e5_detectors.yaml; both neuron choices) with
-# controller.foot_slope_floor = FLOOR beside the same walks at the shipped floor (chapter5.sh's and chapter5_heldout.sh's runs, made here if missing),
-# on SEEDS (default 0-12: 0-2 chapter5.sh's, 3-7 chapter5_heldout.sh's, 8-12 new), and compares them start by start
+# controller.foot_slope_floor = FLOOR beside the same walks at the shipped floor (chapter5.sh's and
+# chapter5_heldout.sh's runs, made here if missing), on SEEDS (default 0-12: 0-2 chapter5.sh's, 3-7
+# chapter5_heldout.sh's, 8-12 new), and compares them start by start
 # (docs/experiments/e5_floor_test.py). About 30 minutes on 2 cores when seeds 0-7's runs exist.
 #   bash docs/experiments/chapter5_floor.sh
 set -euo pipefail
