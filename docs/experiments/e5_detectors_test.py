@@ -15,7 +15,8 @@ from pathlib import Path
 import yaml
 
 from sfl_brain.report.conditions import Trials, mcnemar_exact
-from sfl_brain.report.terrain import detection_rows
+from sfl_brain.report.stats import holm
+from sfl_brain.report.terrain import detection_rows, fired_early, fired_in_time
 
 BAND = "torso"  # the thesis's detector (L1759)
 
@@ -38,13 +39,7 @@ def main() -> None:
         walks[-1][r["detector"]] = r
 
     def in_time(r: dict) -> bool:
-        fired, reached = r["fired"], r["reached"]
-        if reached is None or fired is None or fired < reached:
-            return False
-        return fired - reached <= limit + 1e-9 and (r["pitch"] is None or fired <= r["pitch"])
-
-    def early(r: dict) -> bool:
-        return r["fired"] is not None and (r["reached"] is None or r["fired"] < r["reached"])
+        return fired_in_time(r, limit)
 
     changed = [w for w in walks if w[BAND]["reached"] is not None]
     band = sum(in_time(w[BAND]) for w in changed)
@@ -55,14 +50,13 @@ def main() -> None:
         p, only_band, only_it = mcnemar_exact(pairs)
         tests.append((p, detector, only_band, only_it, sum(b for _, b in pairs)))
     tests.sort()
-    adjusted = 0.0
-    for k, (p, detector, only_band, only_it, n) in enumerate(tests):  # Holm: step down, kept monotone
-        adjusted = max(adjusted, min(1.0, (len(tests) - k) * p))
+    adjusted = holm({detector: p for p, detector, *_ in tests})
+    for p, detector, only_band, only_it, n in tests:
         print(
             f"  {detector}: in time {n}/{len(changed)} against the band's {band}/{len(changed)}; McNemar p = {p:.2g} "
-            f"(only the band {only_band} / only {detector} {only_it}); Holm-adjusted {adjusted:.2g}"
+            f"(only the band {only_band} / only {detector} {only_it}); Holm-adjusted {adjusted[detector]:.2g}"
         )
-    pairs = [(early(w[BAND]), early(w["foot_slope"])) for w in walks]
+    pairs = [(fired_early(w[BAND]), fired_early(w["foot_slope"])) for w in walks]
     p, only_band, only_feet = mcnemar_exact(pairs)
     print(
         f"  false alarms over {len(walks)} walks: the band {sum(a for a, _ in pairs)}, foot_slope "

@@ -23,7 +23,7 @@ import yaml
 
 from sfl_brain.report.conditions import Trials, mcnemar_exact
 from sfl_brain.report.stats import holm
-from sfl_brain.report.terrain import detection_rows
+from sfl_brain.report.terrain import detection_rows, fired_early, fired_in_time
 
 SWITCHING = ("up_switching", "down_switching", "flatdown_switching", "upflat_switching")
 WITHOUT = ("up_without", "down_without", "flatdown_without", "upflat_without")
@@ -37,29 +37,23 @@ def walked(folder: Path) -> dict[tuple[str, int], bool]:
 
 
 def feet(folder: Path) -> list[dict]:
-    """Per logged walk of one detector run, by trial: its case and when the feet fired, met the new ground and pitched
-    past the limit (s of the trial or None), with the scenario's latency."""
+    """Per logged walk of one detector run, by trial: its trial, case, whether a foot met the new ground, and whether
+    the feet fired early or in time (the scenario's latency)."""
     scenario = yaml.safe_load((folder / "scenario.yaml").read_text())
     analysis = next(a for a in scenario["protocol"]["analyses"] if a["kind"] == "detection")
     rows = detection_rows(Trials(scenario, [folder]), [folder], analysis)
-    first = min(r["detector"] for r in rows)
-    walks = [dict(r, fired=None) for r in rows if r["detector"] == first]
-    found = [r for r in rows if r["detector"] == "foot_slope"]
-    if found:
-        walks = found
+    walks = [r for r in rows if r["detector"] == "foot_slope"]
+    if not walks:  # the feet never fired in this run: every walk's row of another detector, the feet's time unset
+        walks = [dict(r, fired=None) for r in rows if r["detector"] == min(x["detector"] for x in rows)]
     limit = float(analysis.get("latency", 0.5))
-    return sorted((dict(w, limit=limit) for w in walks), key=lambda w: w["trial"])  # runs finish trials in any order
-
-
-def early(w: dict) -> bool:
-    return w["fired"] is not None and (w["reached"] is None or w["fired"] < w["reached"])
-
-
-def in_time(w: dict) -> bool:
-    fired, reached = w["fired"], w["reached"]
-    if reached is None or fired is None or fired < reached:
-        return False
-    return fired - reached <= w["limit"] + 1e-9 and (w["pitch"] is None or fired <= w["pitch"])
+    return sorted(
+        (
+            {"trial": w["trial"], "condition": w["condition"], "changed": w["reached"] is not None,
+             "early": fired_early(w), "in_time": fired_in_time(w, limit)}
+            for w in walks
+        ),
+        key=lambda w: w["trial"],  # runs finish their trials in any order
+    )  # fmt: skip
 
 
 def main() -> None:
@@ -95,8 +89,8 @@ def main() -> None:
             for x, y in zip(a, b, strict=True):
                 walks[x["condition"]].append((x, y))
         for c, ws in walks.items():
-            alarms = [(early(x), early(y)) for x, y in ws]
-            timely = [(in_time(x), in_time(y)) for x, y in ws if x["reached"] is not None]
+            alarms = [(x["early"], y["early"]) for x, y in ws]
+            timely = [(x["in_time"], y["in_time"]) for x, y in ws if x["changed"]]
             p_alarm, p_time = mcnemar_exact(alarms)[0], mcnemar_exact(timely)[0] if timely else float("nan")
             print(
                 f"  detectors {c}: false alarms {sum(a for a, _ in alarms)}/{len(ws)} shipped, "

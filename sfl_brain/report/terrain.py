@@ -64,6 +64,20 @@ def detector_of(text: str) -> str:
     return text.split(":")[0].removeprefix("detector ")
 
 
+def fired_early(row: dict) -> bool:
+    """A detection row's detector fired before a foot met the next ground (on a walk that met none: at all)."""
+    return row["fired"] is not None and (row["reached"] is None or row["fired"] < row["reached"])
+
+
+def fired_in_time(row: dict, latency: float) -> bool:
+    """A detection row's detector fired within ``latency`` s after a foot met the next ground, and not after the
+    torso pitched past its limit (``row["pitch"]``)."""
+    fired, reached = row["fired"], row["reached"]
+    if reached is None or fired is None or fired < reached:
+        return False
+    return fired - reached <= latency + 1e-9 and (row["pitch"] is None or fired <= row["pitch"])
+
+
 def detection_rows(t: Trials, run_dirs: list[Path], analysis: dict) -> list[dict]:
     """One row per logged trial and watched detector: trial, condition, detector, fired (s of the trial or None),
     reached (when a foot met the next ground, or None), pitch (when the torso pitch first fell below ``pitch_below``
@@ -127,14 +141,10 @@ def detection_section(t: Trials, run_dirs: list[Path], analysis: dict) -> list[s
             if not mine:
                 continue
             changed = [r for r in mine if r["reached"] is not None]
-            early = [r for r in mine if r["fired"] is not None and (r["reached"] is None or r["fired"] < r["reached"])]
+            early = [r for r in mine if fired_early(r)]
             after = [r for r in changed if r["fired"] is not None and r["fired"] >= r["reached"]]
             latency = [r["fired"] - r["reached"] for r in after]
-            in_time = [
-                r
-                for r in after
-                if r["fired"] - r["reached"] <= limit + 1e-9 and (r["pitch"] is None or r["fired"] <= r["pitch"])
-            ]
+            in_time = [r for r in after if fired_in_time(r, limit)]
             shown = f"{np.median(latency):.2f} [{min(latency):.2f}, {max(latency):.2f}]" if latency else "-"
             lines.append(
                 f"| {c} | {d} | {len(mine)} | {len(changed)} | {len(early)} | {len(after)} | {shown} | "
