@@ -12,9 +12,8 @@ Holm-adjusted over the walks compared."""
 import sys
 from pathlib import Path
 
-import pyarrow.parquet as pq
 
-from sfl_brain.report.conditions import mcnemar_exact
+from sfl_brain.report.conditions import mcnemar_exact, outcomes_by_start
 from sfl_brain.report.stats import holm
 
 #: (run name, condition): the walks the goals count
@@ -22,9 +21,8 @@ WALKS = [("switch", "up_switching"), ("switch", "down_switching"), ("uphill_runu
 
 
 def outcomes(folder: Path, condition: str) -> dict[int, bool]:
-    """Repeat -> success, for the condition's trials of one run (its trials table's ``repeat``: the start)."""
-    rows = pq.read_table(folder / "trials.parquet", columns=["condition", "repeat", "success"]).to_pylist()
-    return {r["repeat"]: bool(r["success"]) for r in rows if r["condition"] == condition}
+    """Repeat (the start) -> success, for the condition's trials of one run."""
+    return {repeat: ok for (c, repeat), ok in outcomes_by_start(folder).items() if c == condition}
 
 
 def main() -> None:

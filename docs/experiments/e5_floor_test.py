@@ -18,22 +18,15 @@ shipped floor (OUT/switch..., OUT/detectors...) against the same scenario's walk
 import sys
 from pathlib import Path
 
-import pyarrow.parquet as pq
 import yaml
 
-from sfl_brain.report.conditions import Trials, mcnemar_exact
+from sfl_brain.report.conditions import Trials, mcnemar_exact, outcomes_by_start
 from sfl_brain.report.stats import holm
 from sfl_brain.report.terrain import detection_rows, fired_early, fired_in_time
 
 SWITCHING = ("up_switching", "down_switching", "flatdown_switching", "upflat_switching")
 WITHOUT = ("up_without", "down_without", "flatdown_without", "upflat_without")
 CASES = ("flat", "up", "down", "flatdown", "upflat")
-
-
-def walked(folder: Path) -> dict[tuple[str, int], bool]:
-    """(condition, repeat) -> walked on, for one switching run."""
-    rows = pq.read_table(folder / "trials.parquet", columns=["condition", "repeat", "success"]).to_pylist()
-    return {(r["condition"], r["repeat"]): bool(r["success"]) for r in rows}
 
 
 def feet(folder: Path) -> list[dict]:
@@ -65,7 +58,8 @@ def main() -> None:
         print(f"best_by {'wins' if by else 'reward'}")
         pairs: dict[str, list] = {c: [] for c in SWITCHING}
         for seed in seeds:
-            shipped, wider = walked(out / f"switch{by}_s{seed}"), walked(out / f"switch_{tag}{by}_s{seed}")
+            shipped = outcomes_by_start(out / f"switch{by}_s{seed}")
+            wider = outcomes_by_start(out / f"switch_{tag}{by}_s{seed}")
             if shipped.keys() != wider.keys():
                 sys.exit(f"switch{by} seed {seed}: the two runs hold different walks")
             for key in shipped:

@@ -93,6 +93,14 @@ def _value(v) -> str:
     return f"{v:g}" if isinstance(v, float) else str(v)
 
 
+def outcomes_by_start(run_dir: Path) -> dict[tuple[str, int], bool]:
+    """(condition, repeat) -> success of one conditions run's trials. A run of the same scenario and seed draws the
+    same start for the same repeat, so two runs' outcomes pair start by start (what ``Trials.paired`` does within a
+    run)."""
+    trials = (r for r in read_records(run_dir) if r.get("kind") == "trial")
+    return {(r["condition"], r["repeat"]): bool(r["success"]) for r in trials}
+
+
 class Trials:
     """The trials of a scenario's completed conditions runs, with what its protocol says about them."""
 
