@@ -435,14 +435,7 @@ class CPGController(Controller):
             raise ValueError(f"CPGController takes trial parameters {list(TRIAL_PARAMS)}; got {unknown}{tail}")
         for name, value in params.items():
             _check_trial_value(name, value, self.circuit, list(self.preset_index), self.params.watched_input)
-        _check_terrain_switch(params)
-        if "foot_slope_floor" in params:
-            switched = params.get("terrain_switch", "off") != "off" and params.get("switch_detector") == "foot_slope"
-            if not switched and "foot_slope" not in self.params.terrain_watch:
-                raise ValueError(
-                    "foot_slope_floor: expected the feet's slope detector watched this trial (switch_detector "
-                    "foot_slope, or foot_slope in the module's terrain_watch); it is not"
-                )
+        _check_terrain_switch(params, self.params.terrain_watch)
         msg = self.trial  # the base sets it before configure (None when configured by hand, e.g. in a test)
         self._control_dt = msg.dt if msg is not None else 0.01
         log = msg is not None and msg.log and self.telemetry is not None
@@ -696,14 +689,21 @@ def _check_trial_value(
             raise ValueError(f"posture_gain: expected circuit {circuit.name} to have a posture (circuit key posture)")
 
 
-def _check_terrain_switch(params: dict) -> None:
-    """What a terrain switch needs besides each value's own check (``configure``; one value alone cannot say)."""
+def _check_terrain_switch(params: dict, watched: list[str]) -> None:
+    """What a terrain switch needs besides each value's own check (``configure``; one value alone cannot say).
+    ``watched``: the detectors the module watches without switching (``terrain_watch``)."""
     if params.get("ankle_adaptation") in ("on", True) and "start_slope_deg" in params:
         raise ValueError(
             "start_slope_deg: expected none with ankle_adaptation 'on' (the adaptation senses the slope the trial "
             "starts on); got both"
         )
     mode = params.get("terrain_switch", "off")
+    if "foot_slope_floor" in params and "foot_slope" not in watched:
+        if mode == "off" or params.get("switch_detector") != "foot_slope":
+            raise ValueError(
+                "foot_slope_floor: expected the feet's slope detector watched this trial (switch_detector "
+                "foot_slope, or foot_slope in the module's terrain_watch); it is not"
+            )
     if mode == "off":
         return
     detector = params.get("switch_detector", "torso")
