@@ -24,43 +24,15 @@ JOBS=${JOBS:-2}
 TRIALS=${TRIALS:-100}
 mkdir -p "$OUT" "$RESULTS"
 
-source docs/experiments/_once.sh  # once DIR COMMAND...: a completed run folder is kept
-export -f once
+source docs/experiments/_chapter5.sh  # once, UP, DOWN, SHORT, learn_runs, walk_runs, report_walks
 
-UP="--set conditions.body.slope_deg=10"
-DOWN="--set conditions.body.slope_deg=-10"
-ADAPTIVE="--set modules.vigilance.params.mode=adaptive --set modules.vigilance.params.value=0"
-SHORT="--set protocol.trials=$TRIALS"
-# issue 29's runs first: the adaptive learn runs on every terrain (E5.2/E5.3), then the walks with their neurons
-{
-  for seed in 0 1 2; do
-    S="--set seed=$seed --set lockstep.pin_cpus=never"  # runs side by side: the OS spreads them over the cores
-    echo "once $OUT/flat_adaptive_s$seed sfl run scenarios/e5_learn.yaml $S $SHORT $ADAPTIVE"
-    echo "once $OUT/uphill_adaptive_s$seed sfl run scenarios/e5_learn.yaml $S $SHORT $UP $ADAPTIVE"
-    echo "once $OUT/downhill_adaptive_s$seed sfl run scenarios/e5_learn.yaml $S $SHORT $DOWN $ADAPTIVE"
-  done
-} | xargs -P "$JOBS" -I{} bash -c "{}"
-
-# the walks, with each seed's learnt neurons (two body workers: both cores), taken two ways (protocol.best_by):
-# the thesis's, the success neuron nearest the highest-reward trial (L1584: runs NAME_sN), and the success neuron that
-# won the most successful trials (runs NAME_wins_sN)
+# issue 29's runs first: the adaptive learn runs on every terrain (E5.2/E5.3), then the walks with their neurons (both
+# neuron choices), seeds 0-2
+learn_runs 0 1 2
 for seed in 0 1 2; do
-  FLAT="--set protocol.best_of.flat=$OUT/flat_adaptive_s$seed"
-  UPHILL="--set protocol.best_of.uphill=$OUT/uphill_adaptive_s$seed"
-  DOWNHILL="--set protocol.best_of.downhill=$OUT/downhill_adaptive_s$seed"
-  for by in reward wins; do
-    TAG=$([ $by = wins ] && echo _wins || true)
-    BY="--set protocol.best_by=$by"
-    once "$OUT/switch${TAG}_s$seed" sfl run scenarios/e5_switch.yaml --set seed=$seed $BY $FLAT $UPHILL $DOWNHILL
-    once "$OUT/switch_flat${TAG}_s$seed" sfl run scenarios/e5_switch_flat.yaml --set seed=$seed $BY $FLAT $UPHILL
-    once "$OUT/uphill_runup${TAG}_s$seed" sfl run scenarios/e5_uphill_runup.yaml --set seed=$seed $BY $UPHILL
-    once "$OUT/detectors${TAG}_s$seed" sfl run scenarios/e5_detectors.yaml --set seed=$seed $BY $FLAT $UPHILL $DOWNHILL
-  done
+  walk_runs $seed
 done
-for name in switch switch_flat uphill_runup detectors; do
-  sfl report "$OUT/${name}"_s0 "$OUT/${name}"_s1 "$OUT/${name}"_s2 --out "$RESULTS"
-  sfl report "$OUT/${name}"_wins_s0 "$OUT/${name}"_wins_s1 "$OUT/${name}"_wins_s2 --out "$RESULTS/wins"
-done
+report_walks "$RESULTS" 0 1 2
 # the detectors compared on the same walks: McNemar's exact test against the thesis's torso band, Holm-adjusted
 python docs/experiments/e5_detectors_test.py "$OUT"
 python docs/experiments/e5_detectors_test.py "$OUT" detectors_wins
@@ -87,6 +59,7 @@ python docs/experiments/e5_why.py "$OUT"
   done
 } | xargs -P "$JOBS" -I{} bash -c "{}"
 sfl report "$OUT"/flat_box40_s0 "$OUT"/flat_box40_s1 "$OUT"/flat_box40_s2 --out "$RESULTS/box40"
-sfl report "$OUT"/qarl_s* "$OUT"/noqarl_s* "$OUT"/flat_adaptive_s* "$OUT"/uphill_fixed_s* "$OUT"/uphill_adaptive_s* \
-  "$OUT"/downhill_adaptive_s* --out "$RESULTS"
+# seeds 0-2 by name: chapter5_heldout.sh and chapter5_floor.sh put other seeds' learn runs in the same OUT
+sfl report "$OUT"/qarl_s[012] "$OUT"/noqarl_s[012] "$OUT"/flat_adaptive_s[012] "$OUT"/uphill_fixed_s[012] \
+  "$OUT"/uphill_adaptive_s[012] "$OUT"/downhill_adaptive_s[012] --out "$RESULTS"
 

@@ -19,26 +19,11 @@ FLOOR=${FLOOR:-0.0524}
 TAG=${TAG:-floor3}
 mkdir -p "$OUT"
 
-source docs/experiments/_once.sh  # once DIR COMMAND...: a completed run folder is kept
-export -f once
+source docs/experiments/_chapter5.sh  # once, learn_runs, neurons
 
-UP="--set conditions.body.slope_deg=10"
-DOWN="--set conditions.body.slope_deg=-10"
-ADAPTIVE="--set modules.vigilance.params.mode=adaptive --set modules.vigilance.params.value=0"
-SHORT="--set protocol.trials=$TRIALS"
-{
-  for seed in $SEEDS; do
-    S="--set seed=$seed --set lockstep.pin_cpus=never"
-    echo "once $OUT/flat_adaptive_s$seed sfl run scenarios/e5_learn.yaml $S $SHORT $ADAPTIVE"
-    echo "once $OUT/uphill_adaptive_s$seed sfl run scenarios/e5_learn.yaml $S $SHORT $UP $ADAPTIVE"
-    echo "once $OUT/downhill_adaptive_s$seed sfl run scenarios/e5_learn.yaml $S $SHORT $DOWN $ADAPTIVE"
-  done
-} | xargs -P "$JOBS" -I{} bash -c "{}"
-
+learn_runs $SEEDS
 for seed in $SEEDS; do
-  FLAT="--set protocol.best_of.flat=$OUT/flat_adaptive_s$seed"
-  UPHILL="--set protocol.best_of.uphill=$OUT/uphill_adaptive_s$seed"
-  DOWNHILL="--set protocol.best_of.downhill=$OUT/downhill_adaptive_s$seed"
+  neurons $seed
   WIDER="--set conditions.controller.foot_slope_floor=$FLOOR"
   for by in reward wins; do
     BY_TAG=$([ $by = wins ] && echo _wins || true)

@@ -16,47 +16,15 @@ TRIALS=${TRIALS:-100}
 SEEDS=${SEEDS:-3 4 5 6 7}
 mkdir -p "$OUT" "$RESULTS"
 
-source docs/experiments/_once.sh  # once DIR COMMAND...: a completed run folder is kept
-export -f once
+source docs/experiments/_chapter5.sh  # once, learn_runs, walk_runs, report_walks
 
-UP="--set conditions.body.slope_deg=10"
-DOWN="--set conditions.body.slope_deg=-10"
-ADAPTIVE="--set modules.vigilance.params.mode=adaptive --set modules.vigilance.params.value=0"
-SHORT="--set protocol.trials=$TRIALS"
-{
-  for seed in $SEEDS; do
-    S="--set seed=$seed --set lockstep.pin_cpus=never"
-    echo "once $OUT/flat_adaptive_s$seed sfl run scenarios/e5_learn.yaml $S $SHORT $ADAPTIVE"
-    echo "once $OUT/uphill_adaptive_s$seed sfl run scenarios/e5_learn.yaml $S $SHORT $UP $ADAPTIVE"
-    echo "once $OUT/downhill_adaptive_s$seed sfl run scenarios/e5_learn.yaml $S $SHORT $DOWN $ADAPTIVE"
-  done
-} | xargs -P "$JOBS" -I{} bash -c "{}"
-
+learn_runs $SEEDS
 learn=()
 for seed in $SEEDS; do
   learn+=("$OUT/flat_adaptive_s$seed" "$OUT/uphill_adaptive_s$seed" "$OUT/downhill_adaptive_s$seed")
-  FLAT="--set protocol.best_of.flat=$OUT/flat_adaptive_s$seed"
-  UPHILL="--set protocol.best_of.uphill=$OUT/uphill_adaptive_s$seed"
-  DOWNHILL="--set protocol.best_of.downhill=$OUT/downhill_adaptive_s$seed"
-  for by in reward wins; do
-    TAG=$([ $by = wins ] && echo _wins || true)
-    BY="--set protocol.best_by=$by"
-    once "$OUT/switch${TAG}_s$seed" sfl run scenarios/e5_switch.yaml --set seed=$seed $BY $FLAT $UPHILL $DOWNHILL
-    once "$OUT/switch_flat${TAG}_s$seed" sfl run scenarios/e5_switch_flat.yaml --set seed=$seed $BY $FLAT $UPHILL
-    once "$OUT/uphill_runup${TAG}_s$seed" sfl run scenarios/e5_uphill_runup.yaml --set seed=$seed $BY $UPHILL
-    once "$OUT/detectors${TAG}_s$seed" sfl run scenarios/e5_detectors.yaml --set seed=$seed $BY $FLAT $UPHILL $DOWNHILL
-  done
+  walk_runs $seed
 done
-for name in switch switch_flat uphill_runup detectors; do
-  runs=()
-  wins=()
-  for seed in $SEEDS; do
-    runs+=("$OUT/${name}_s$seed")
-    wins+=("$OUT/${name}_wins_s$seed")
-  done
-  sfl report "${runs[@]}" --out "$RESULTS"
-  sfl report "${wins[@]}" --out "$RESULTS/wins"
-done
+report_walks "$RESULTS" $SEEDS
 sfl report "${learn[@]}" --out "$RESULTS/learn"
 # the same tests as chapter5.sh's, over these seeds: the detectors against the torso band, and the two neuron choices
 SEEDLIST=$(echo $SEEDS | tr ' ' ',')
