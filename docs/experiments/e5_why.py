@@ -370,18 +370,18 @@ def main(argv: list[str]) -> int:
         print(f"the torso passed {TORSO_DEG:g} deg):")
         walks = feet_walks(runs, tag)
         print("\n".join(contact_rows(walks)))
-        print("\nthe weight shared between the feet: s since both feet last carried at least a share x of the feet's")
-        print("summed pressure (fires, latency and early as above):")
-        print("\n".join(shared_rows(walks)))
-        print("\na foot on its heel (toe) alone pitched toe-down (toe-up) past the slope of the ground walked before")
-        print("the edge, deg (fires, latency and early as above):")
-        print("\n".join(pitched_rows(walks)))
-        print("\nthe sensed state's distance from the flat walks' at the same gait phase (walks that start on the")
-        print("flat; up -> flat and down -> flat start on a ramp and are left out):")
-        print("\n".join(novelty_rows(walks)))
-        print("\nthe slope of the line between the feet's pressed points against the ground walked before the edge,")
-        print("deg (fires, latency and early as above):")
-        print("\n".join(feet_line_rows(walks)))
+        for heading, rows in (
+            ("the weight shared between the feet: s since both feet last carried at least a share x of the feet's\n"
+             "summed pressure (fires, latency and early as above):", shared_rows),
+            ("a foot on its heel (toe) alone pitched toe-down (toe-up) past the slope of the ground walked before\n"
+             "the edge, deg (fires, latency and early as above):", pitched_rows),
+            ("the sensed state's distance from the flat walks' at the same gait phase (walks that start on the\n"
+             "flat; up -> flat and down -> flat start on a ramp and are left out):", novelty_rows),
+            ("the slope of the line between the feet's pressed points against the ground walked before the edge,\n"
+             "deg (fires, latency and early as above):", feet_line_rows),
+        ):  # fmt: skip
+            print("\n" + heading)
+            print("\n".join(rows(walks)))
         print("\ndownhill -> flat without switching:")
         print("\n".join(downhill_without(runs, tag)), "\n")
     return 0
